@@ -1,0 +1,11 @@
+// The one place that lists the subcommands. A command is registered when it works.
+#include "command.h"
+
+namespace diffdyn::cli {
+
+void RegisterCommands(CLI::App& app) {
+  RegisterDemoCommand(app);
+  RegisterInfoCommand(app);
+}
+
+}  // namespace diffdyn::cli
