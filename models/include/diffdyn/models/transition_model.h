@@ -1,0 +1,74 @@
+// Transition models: x_{t+1} = F(x_t, u_t).
+//
+// A transition model maps a state x (n) and an action u (m) to the next state.
+// For the pushing task x = (x, y, theta) is the block's planar pose and
+// u = (push_location, push_angle, push_length); n = m = 3. The four learned
+// models of the NeuralODE-Panda paper (absolute / residual NN and NeuralODE),
+// extended physics models and the ODE-engine simulation itself (the "oracle")
+// all implement this one interface, so MPPI, evaluation and figures take any of
+// them.
+//
+// The interface is the batched `double` path used by training, evaluation and
+// MPPI: B samples at once, one sample per column. Derivatives come from the
+// concrete model types' templated paths (Jets) and reverse-mode VJPs.
+//
+// The model is immutable; scratch space lives in a workspace, one per thread:
+//
+//   auto ws = model.MakeWorkspace(/*max_batch=*/1000);
+//   Eigen::MatrixXd next(3, 1000);
+//   model.PredictBatch(states, actions, next, *ws);  // states, actions: 3 x 1000
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include <Eigen/Core>
+
+#include "diffdyn/autodiff_ode/check.h"
+
+namespace diffdyn {
+
+/// Per-thread scratch space of a transition model. Each model derives its own.
+class TransitionWorkspace {
+ public:
+  virtual ~TransitionWorkspace() = default;
+};
+
+/// x_{t+1} = F(x_t, u_t) over batches: the common interface of every dynamics model.
+class TransitionModel {
+ public:
+  virtual ~TransitionModel() = default;
+
+  /// n, the size of the state x.
+  virtual int state_size() const = 0;
+  /// m, the size of the action u.
+  virtual int action_size() const = 0;
+  /// The model-file kind ("abs-nn", "res-node", "oracle", ...).
+  virtual std::string kind() const = 0;
+
+  /// Scratch space for batches of up to `max_batch` samples (one per thread).
+  virtual std::unique_ptr<TransitionWorkspace> MakeWorkspace(int max_batch) const = 0;
+
+  /// next(:, b) = F(states(:, b), actions(:, b)) for b < B. states: n x B,
+  /// actions: m x B, next: n x B with B <= the workspace's max_batch.
+  /// Throws diffdyn::Error on wrong sizes.
+  virtual void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                            const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                            Eigen::Ref<Eigen::MatrixXd> next, TransitionWorkspace& ws) const = 0;
+
+ protected:
+  /// Checks the sizes of a PredictBatch call, naming them on failure.
+  void CheckBatchSizes(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                       const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                       const Eigen::Ref<Eigen::MatrixXd>& next) const {
+    DIFFDYN_CHECK(states.rows() == state_size() && actions.rows() == action_size() &&
+                      next.rows() == state_size() && actions.cols() == states.cols() &&
+                      next.cols() == states.cols(),
+                  kind(), ": PredictBatch got states ", states.rows(), "x", states.cols(),
+                  ", actions ", actions.rows(), "x", actions.cols(), ", next ", next.rows(), "x",
+                  next.cols(), "; expected ", state_size(), "xB, ", action_size(), "xB, ",
+                  state_size(), "xB");
+  }
+};
+
+}  // namespace diffdyn
