@@ -1,0 +1,45 @@
+#include "plot.h"
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+
+namespace diffdyn::cli {
+
+std::filesystem::path PlotsDir() {
+  namespace fs = std::filesystem;
+  if (const char* env = std::getenv("DIFFDYN_PLOTS_DIR"); env != nullptr && *env != '\0') {
+    return env;
+  }
+  const fs::path source = fs::path(DIFFDYN_SOURCE_DIR) / "scripts" / "plots";
+  if (fs::is_directory(source)) return source;
+  return fs::path(DIFFDYN_INSTALL_DATADIR) / "plots";
+}
+
+bool RunPlotScript(const std::string& script, const std::vector<std::string>& args) {
+  const std::string path = (PlotsDir() / script).string();
+  std::vector<std::string> argv_storage = {"python3", path};
+  argv_storage.insert(argv_storage.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (auto& a : argv_storage) argv.push_back(a.data());
+  argv.push_back(nullptr);
+
+  // fork + exec: no shell, so paths need no quoting.
+  std::fflush(nullptr);
+  const pid_t pid = fork();
+  if (pid == 0) {
+    setenv("MPLBACKEND", "Agg", 1);
+    execvp("python3", argv.data());
+    _exit(127);
+  }
+  int status = 0;
+  if (pid < 0 || waitpid(pid, &status, 0) < 0 || !WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    std::fprintf(stderr, "warning: plot script %s failed; the CSV data is written\n", path.c_str());
+    return false;
+  }
+  return true;
+}
+
+}  // namespace diffdyn::cli
