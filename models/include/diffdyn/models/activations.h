@@ -1,0 +1,294 @@
+// Activation functions with their first and second derivatives.
+//
+// A layer of a deep differential network (DDN) computes h' = g(a) with
+// a = W h + b. Its input Jacobian needs g'(a), and any gradient of a loss on
+// that Jacobian (Jacobian losses, DeLaN, Hessians) needs g''(a):
+//
+//   d h'/d h   = diag(g'(a)) W
+//   d g'(a)/da = g''(a)
+//
+// The activations here, with a parameter p where they have one:
+//
+//   name      g(a)                          g'(a)                 g''(a)
+//   linear    a                             1                     0
+//   relu      max(a, 0)                     [a > 0]               0
+//   softplus  log(1 + exp(p a)) / p         s = sigmoid(p a)      p s (1 - s)
+//   tanh      t = tanh(a)                   1 - t^2               -2 t (1 - t^2)
+//   sigmoid   s = 1 / (1 + exp(-a))         s (1 - s)             s (1 - s)(1 - 2 s)
+//   elu       a > 0 ? a : p (exp(a) - 1)    a > 0 ? 1 : p exp(a)  a > 0 ? 0 : p exp(a)
+//   cos       cos(p a)                      -p sin(p a)           -p^2 cos(p a)
+//
+// relu's derivative at the kink a = 0 is taken as 0 (as the DDN code does).
+// Softplus is evaluated in the overflow-free form max(z, 0) + log1p(exp(-|z|))
+// with z = p a, and the sigmoid as 1/(1+e) or e/(1+e) with e = exp(-|z|).
+//
+// Two evaluation paths share these definitions:
+//   * ActivationValue / ActivationDerivative / ActivationSecondDerivative are
+//     templated on the scalar (double or ceres::Jet) for single samples;
+//   * ApplyActivation evaluates g, g' and optionally g'' over a whole array of
+//     pre-activations in one vectorised pass (the batched double path).
+//
+//   Activation act = Activation::Softplus(2.0);
+//   double y = ActivationValue(act, 0.3), dy = ActivationDerivative(act, 0.3);
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include <Eigen/Core>
+
+#include "diffdyn/autodiff_ode/check.h"
+
+namespace diffdyn {
+
+/// The activation functions of the table in activations.h.
+enum class ActivationKind { kLinear, kRelu, kSoftplus, kTanh, kSigmoid, kElu, kCos };
+
+/// An activation g with its parameter p (softplus beta, elu alpha, cos frequency;
+/// ignored by the others). Plain value type.
+struct Activation {
+  ActivationKind kind = ActivationKind::kLinear;
+  double param = 1.0;
+
+  /// g(a) = a.
+  static Activation Linear() { return {ActivationKind::kLinear, 1.0}; }
+  /// g(a) = max(a, 0).
+  static Activation Relu() { return {ActivationKind::kRelu, 1.0}; }
+  /// g(a) = log(1 + exp(beta a)) / beta, beta > 0.
+  static Activation Softplus(double beta = 1.0) { return {ActivationKind::kSoftplus, beta}; }
+  /// g(a) = tanh(a).
+  static Activation Tanh() { return {ActivationKind::kTanh, 1.0}; }
+  /// g(a) = 1 / (1 + exp(-a)).
+  static Activation Sigmoid() { return {ActivationKind::kSigmoid, 1.0}; }
+  /// g(a) = a for a > 0, alpha (exp(a) - 1) otherwise.
+  static Activation Elu(double alpha = 1.0) { return {ActivationKind::kElu, alpha}; }
+  /// g(a) = cos(omega a).
+  static Activation Cos(double omega = 1.0) { return {ActivationKind::kCos, omega}; }
+
+  bool operator==(const Activation&) const = default;
+};
+
+/// The lower-case name of an activation kind ("relu", "softplus", ...).
+inline std::string ActivationName(ActivationKind kind) {
+  switch (kind) {
+    case ActivationKind::kLinear: return "linear";
+    case ActivationKind::kRelu: return "relu";
+    case ActivationKind::kSoftplus: return "softplus";
+    case ActivationKind::kTanh: return "tanh";
+    case ActivationKind::kSigmoid: return "sigmoid";
+    case ActivationKind::kElu: return "elu";
+    case ActivationKind::kCos: return "cos";
+  }
+  return "unknown";
+}
+
+/// Parses a name of ActivationName() with parameter `param`; throws diffdyn::Error
+/// for an unknown name or a non-positive softplus beta.
+inline Activation MakeActivation(const std::string& name, double param = 1.0) {
+  DIFFDYN_CHECK(std::isfinite(param), "activation '", name, "': parameter is not finite");
+  for (ActivationKind kind :
+       {ActivationKind::kLinear, ActivationKind::kRelu, ActivationKind::kSoftplus,
+        ActivationKind::kTanh, ActivationKind::kSigmoid, ActivationKind::kElu,
+        ActivationKind::kCos}) {
+    if (ActivationName(kind) == name) {
+      DIFFDYN_CHECK(kind != ActivationKind::kSoftplus || param > 0.0,
+                    "activation 'softplus' needs beta > 0, got ", param);
+      return {kind, param};
+    }
+  }
+  throw Error(StrCat("unknown activation '", name,
+                     "' (expected linear, relu, softplus, tanh, sigmoid, elu or cos)"));
+}
+
+namespace internal {
+
+// Logistic sigmoid without overflow: 1/(1+e) for z >= 0, e/(1+e) otherwise.
+template <typename S>
+S StableSigmoid(const S& z) {
+  using std::abs;
+  using std::exp;
+  const S e = exp(-abs(z));
+  return z >= S(0.0) ? S(1.0) / (S(1.0) + e) : e / (S(1.0) + e);
+}
+
+}  // namespace internal
+
+/// g(a) for a scalar a (double or ceres::Jet).
+template <typename S>
+S ActivationValue(const Activation& act, const S& a) {
+  using std::abs;
+  using std::cos;
+  using std::exp;
+  using std::expm1;
+  using std::log1p;
+  using std::tanh;
+  const double p = act.param;
+  switch (act.kind) {
+    case ActivationKind::kLinear: return a;
+    case ActivationKind::kRelu: return a > S(0.0) ? a : S(0.0);
+    case ActivationKind::kSoftplus: {
+      const S z = p * a;
+      const S pos = z > S(0.0) ? z : S(0.0);
+      return (pos + log1p(exp(-abs(z)))) / p;
+    }
+    case ActivationKind::kTanh: return tanh(a);
+    case ActivationKind::kSigmoid: return internal::StableSigmoid(a);
+    case ActivationKind::kElu: return a > S(0.0) ? a : p * expm1(a);
+    case ActivationKind::kCos: return cos(p * a);
+  }
+  return a;
+}
+
+/// g'(a) for a scalar a (double or ceres::Jet); relu's g'(0) = 0.
+template <typename S>
+S ActivationDerivative(const Activation& act, const S& a) {
+  using std::cos;
+  using std::exp;
+  using std::sin;
+  using std::tanh;
+  const double p = act.param;
+  switch (act.kind) {
+    case ActivationKind::kLinear: return S(1.0);
+    case ActivationKind::kRelu: return a > S(0.0) ? S(1.0) : S(0.0);
+    case ActivationKind::kSoftplus: return internal::StableSigmoid(S(p * a));
+    case ActivationKind::kTanh: {
+      const S t = tanh(a);
+      return S(1.0) - t * t;
+    }
+    case ActivationKind::kSigmoid: {
+      const S s = internal::StableSigmoid(a);
+      return s * (S(1.0) - s);
+    }
+    case ActivationKind::kElu: return a > S(0.0) ? S(1.0) : p * exp(a);
+    case ActivationKind::kCos: return -p * sin(p * a);
+  }
+  return S(1.0);
+}
+
+/// g''(a) for a scalar a (double or ceres::Jet); relu's g'' = 0 everywhere.
+template <typename S>
+S ActivationSecondDerivative(const Activation& act, const S& a) {
+  using std::cos;
+  using std::exp;
+  using std::tanh;
+  const double p = act.param;
+  switch (act.kind) {
+    case ActivationKind::kLinear:
+    case ActivationKind::kRelu: return S(0.0);
+    case ActivationKind::kSoftplus: {
+      const S s = internal::StableSigmoid(S(p * a));
+      return p * s * (S(1.0) - s);
+    }
+    case ActivationKind::kTanh: {
+      const S t = tanh(a);
+      return S(-2.0) * t * (S(1.0) - t * t);
+    }
+    case ActivationKind::kSigmoid: {
+      const S s = internal::StableSigmoid(a);
+      return s * (S(1.0) - s) * (S(1.0) - S(2.0) * s);
+    }
+    case ActivationKind::kElu: return a > S(0.0) ? S(0.0) : p * exp(a);
+    case ActivationKind::kCos: return -p * p * cos(p * a);
+  }
+  return S(0.0);
+}
+
+/// Batched evaluation over n contiguous pre-activations a[0..n):
+/// g[i] = g(a[i]), dg[i] = g'(a[i]) and, when ddg is not null, ddg[i] = g''(a[i]).
+/// g may alias a (in-place). dg may be null when only values are needed.
+/// Uses Eigen's vectorised exp; no allocation.
+inline void ApplyActivation(const Activation& act, const double* a, Eigen::Index n, double* g,
+                            double* dg, double* ddg) {
+  using Arr = Eigen::Map<Eigen::ArrayXd>;
+  const Eigen::Map<const Eigen::ArrayXd> av(a, n);
+  Arr gv(g, n);
+  const double p = act.param;
+  switch (act.kind) {
+    case ActivationKind::kLinear:
+      if (g != a) gv = av;
+      if (dg) Arr(dg, n).setOnes();
+      if (ddg) Arr(ddg, n).setZero();
+      return;
+    case ActivationKind::kRelu:
+      if (dg) Arr(dg, n) = (av > 0.0).cast<double>();
+      if (ddg) Arr(ddg, n).setZero();
+      gv = av.max(0.0);
+      return;
+    case ActivationKind::kSoftplus: {
+      // e = exp(-|p a|) in (0, 1]: no overflow; s = sigmoid(p a).
+      constexpr Eigen::Index kBlock = 64;
+      double e_buf[kBlock];
+      double s_buf[kBlock];
+      for (Eigen::Index start = 0; start < n; start += kBlock) {
+        const Eigen::Index m = std::min(kBlock, n - start);
+        Eigen::Map<Eigen::ArrayXd> e(e_buf, m);
+        Eigen::Map<Eigen::ArrayXd> s(s_buf, m);
+        const auto z = p * av.segment(start, m);
+        e = (-z.abs()).exp();
+        if (dg || ddg) s = (z >= 0.0).select(1.0 / (1.0 + e), e / (1.0 + e));
+        if (dg) Arr(dg + start, m) = s;
+        if (ddg) Arr(ddg + start, m) = p * s * (1.0 - s);
+        gv.segment(start, m) = (z.max(0.0) + (1.0 + e).log()) / p;
+      }
+      return;
+    }
+    case ActivationKind::kTanh: {
+      // t = sign(a) (1 - e) / (1 + e), e = exp(-2|a|).
+      constexpr Eigen::Index kBlock = 64;
+      double e_buf[kBlock];
+      for (Eigen::Index start = 0; start < n; start += kBlock) {
+        const Eigen::Index m = std::min(kBlock, n - start);
+        Eigen::Map<Eigen::ArrayXd> e(e_buf, m);
+        const auto x = av.segment(start, m);
+        e = (-2.0 * x.abs()).exp();
+        auto t = gv.segment(start, m);
+        t = (x >= 0.0).select((1.0 - e) / (1.0 + e), (e - 1.0) / (1.0 + e));
+        if (dg) Arr(dg + start, m) = 1.0 - t * t;
+        if (ddg) Arr(ddg + start, m) = -2.0 * t * (1.0 - t * t);
+      }
+      return;
+    }
+    case ActivationKind::kSigmoid: {
+      constexpr Eigen::Index kBlock = 64;
+      double e_buf[kBlock];
+      for (Eigen::Index start = 0; start < n; start += kBlock) {
+        const Eigen::Index m = std::min(kBlock, n - start);
+        Eigen::Map<Eigen::ArrayXd> e(e_buf, m);
+        const auto x = av.segment(start, m);
+        e = (-x.abs()).exp();
+        auto s = gv.segment(start, m);
+        s = (x >= 0.0).select(1.0 / (1.0 + e), e / (1.0 + e));
+        if (dg) Arr(dg + start, m) = s * (1.0 - s);
+        if (ddg) Arr(ddg + start, m) = s * (1.0 - s) * (1.0 - 2.0 * s);
+      }
+      return;
+    }
+    case ActivationKind::kElu: {
+      constexpr Eigen::Index kBlock = 64;
+      double e_buf[kBlock];
+      for (Eigen::Index start = 0; start < n; start += kBlock) {
+        const Eigen::Index m = std::min(kBlock, n - start);
+        Eigen::Map<Eigen::ArrayXd> e(e_buf, m);
+        const auto x = av.segment(start, m);
+        e = x.min(0.0).exp();
+        const auto pos = (x > 0.0);
+        if (dg) Arr(dg + start, m) = pos.select(1.0, p * e);
+        if (ddg) Arr(ddg + start, m) = pos.select(0.0, p * e);
+        gv.segment(start, m) = pos.select(x, p * (e - 1.0));
+      }
+      return;
+    }
+    case ActivationKind::kCos: {
+      for (Eigen::Index i = 0; i < n; ++i) {
+        const double c = std::cos(p * a[i]);
+        if (dg) dg[i] = -p * std::sin(p * a[i]);
+        if (ddg) ddg[i] = -p * p * c;
+        g[i] = c;
+      }
+      return;
+    }
+  }
+}
+
+}  // namespace diffdyn

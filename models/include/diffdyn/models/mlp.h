@@ -1,0 +1,605 @@
+// The multilayer perceptron / deep differential network (DDN).
+//
+// An Mlp with layer sizes n_0 (inputs), n_1, ..., n_L (outputs) computes, for
+// layers l = 0 .. L-1 with W_l of size n_{l+1} x n_l and b_l of size n_{l+1},
+//
+//   h_0 = x,   a_l = W_l h_l + b_l,   h_{l+1} = g_l(a_l)   (hidden layers),
+//   y = a_{L-1}                                            (linear output).
+//
+// Deep differential network: the input Jacobian comes out of the same pass,
+// chaining Z_l = dh_l/dx (n_l x n_0) from Z_0 = I:
+//
+//   U_l = W_l Z_l,   Z_{l+1} = diag(g_l'(a_l)) U_l,   dy/dx = U_{L-1}.
+//
+// Batched paths put samples in columns: X is n_0 x B, Y is n_L x B, and the B
+// Jacobians are stacked side by side, J = [J_1 J_2 ... J_B] (n_L x n_0 B), so
+// each layer of the chain is one GEMM W_l [Z_l^1 ... Z_l^B].
+//
+// Reverse mode (Backward) takes cotangents Gy = dL/dY and, optionally,
+// GJ = dL/dJ (same layout as J) and returns dL/dtheta and dL/dX. Walking the
+// layers backwards with abar = dL/da_l and ubar = dL/dU_l:
+//
+//   dL/dW_l += abar h_l^T + ubar Z_l^T,       dL/db_l += sum_b abar,
+//   hbar = W_l^T abar,   zbar = W_l^T ubar               (to layer l-1),
+//   dbar = sum_j zbar[:, j] .* U_{l-1}[:, j]             (cotangent of g'),
+//   abar = hbar .* g'(a_{l-1}) + dbar .* g''(a_{l-1}),   ubar = diag(g') zbar,
+//   dL/dx = W_0^T abar.
+//
+// This is why every activation carries g'': a loss on the Jacobian reaches the
+// weights through the derivative of g'. All products are GEMMs over the batch.
+//
+// Parameters: ONE flat vector theta = [vec(W_0), b_0, vec(W_1), b_1, ...], each
+// W_l column-major. Optimisers, Ceres and model files all see this vector.
+//
+// Threads: the batch is cut into chunks of MlpWorkspace::chunk_size() samples
+// (independent of the thread count); each chunk works in its own buffers and
+// the per-chunk parameter gradients are summed in chunk order, so results are
+// bit-identical at any thread count.
+//
+//   Mlp<double> net(MlpArchitecture{{2, 64, 64, 1}, {Activation::Softplus(),
+//                                                  Activation::Softplus()}}, theta);
+//   MlpWorkspace ws(net.architecture(), 256);
+//   net.Forward(X, &Y, &J, &ws);                   // values and Jacobians
+//   net.Backward(Gy, GJ, &grad, nullptr, &ws);     // dL/dtheta
+#pragma once
+
+#include <algorithm>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/parallel.h"
+#include "diffdyn/models/activations.h"
+
+namespace diffdyn {
+
+/// Layer sizes [n_0 = inputs, n_1, ..., n_L = outputs] and one activation per
+/// hidden layer (L - 1 of them); the output layer is linear.
+struct MlpArchitecture {
+  std::vector<int> sizes;
+  std::vector<Activation> activations;
+
+  /// Number of affine layers L = sizes.size() - 1.
+  int num_layers() const { return static_cast<int>(sizes.size()) - 1; }
+  /// n_0.
+  int num_inputs() const { return sizes.front(); }
+  /// n_L.
+  int num_outputs() const { return sizes.back(); }
+  /// Largest layer width max_l n_l.
+  int max_width() const { return *std::max_element(sizes.begin(), sizes.end()); }
+  /// Offset of vec(W_l) in the flat parameter vector.
+  Eigen::Index WeightOffset(int l) const {
+    Eigen::Index offset = 0;
+    for (int k = 0; k < l; ++k) offset += Eigen::Index(sizes[k + 1]) * (sizes[k] + 1);
+    return offset;
+  }
+  /// Offset of b_l in the flat parameter vector.
+  Eigen::Index BiasOffset(int l) const {
+    return WeightOffset(l) + Eigen::Index(sizes[l + 1]) * sizes[l];
+  }
+  /// Total parameter count sum_l n_{l+1} (n_l + 1).
+  Eigen::Index num_parameters() const { return WeightOffset(num_layers()); }
+
+  /// Throws diffdyn::Error unless there are >= 2 sizes, all positive, and
+  /// exactly L - 1 activations with valid parameters.
+  void Validate() const {
+    DIFFDYN_CHECK(sizes.size() >= 2, "MLP needs at least an input and an output size, got ",
+                  sizes.size(), " sizes");
+    for (int s : sizes) DIFFDYN_CHECK(s > 0, "MLP layer sizes must be positive, got ", s);
+    DIFFDYN_CHECK(static_cast<int>(activations.size()) == num_layers() - 1, "MLP with ",
+                  num_layers() - 1, " hidden layers needs as many activations, got ",
+                  activations.size());
+    for (const Activation& a : activations) {
+      DIFFDYN_CHECK(std::isfinite(a.param), "MLP activation parameter is not finite");
+      DIFFDYN_CHECK(a.kind != ActivationKind::kSoftplus || a.param > 0.0,
+                    "softplus beta must be positive, got ", a.param);
+    }
+  }
+
+  bool operator==(const MlpArchitecture&) const = default;
+};
+
+/// Scratch buffers of the batched paths, for one thread of work: per chunk of
+/// samples, the pre-activations, activations, g', g'', the Jacobian chain and
+/// the backward cotangents. Sized once (Reserve); afterwards the batched calls
+/// do not allocate for batches up to the reserved size. Not shared between
+/// concurrent calls; one model may be used with many workspaces at once.
+class MlpWorkspace {
+ public:
+  /// Default chunk size: 256 samples per chunk (a batch of 500 = 2 chunks).
+  static constexpr int kDefaultChunkSize = 256;
+
+  MlpWorkspace() = default;
+  /// Workspace for `arch` and batches up to `max_batch` samples, cut into
+  /// chunks of `chunk_size` samples; `jacobian` reserves the Jacobian chain.
+  MlpWorkspace(const MlpArchitecture& arch, int max_batch, int chunk_size = kDefaultChunkSize,
+               bool jacobian = true)
+      : chunk_size_(chunk_size) {
+    DIFFDYN_CHECK(chunk_size > 0, "MlpWorkspace: chunk size must be positive, got ", chunk_size);
+    Reserve(arch, max_batch, jacobian);
+  }
+
+  /// Samples per chunk (fixes the summation order, so the results).
+  int chunk_size() const { return chunk_size_; }
+
+  /// Makes room for `batch` samples of `arch` (allocates only when growing).
+  void Reserve(const MlpArchitecture& arch, int batch, bool jacobian) {
+    if (!(arch == arch_)) {
+      arch_ = arch;
+      chunks_.clear();
+      jacobian_ = false;
+    }
+    const int needed = NumChunks(batch, chunk_size_);
+    if (static_cast<int>(chunks_.size()) >= needed && (jacobian_ || !jacobian)) return;
+    jacobian_ = jacobian_ || jacobian;
+    chunks_.resize(std::max<std::size_t>(chunks_.size(), needed));
+    for (Chunk& c : chunks_) c.Allocate(arch_, chunk_size_, jacobian_);
+  }
+
+ private:
+  template <typename>
+  friend class Mlp;
+
+  // Buffers of one chunk of at most `chunk_size_` samples.
+  struct Chunk {
+    std::vector<Eigen::MatrixXd> h;    // h_l, n_l x cap, l = 0 .. L-1
+    std::vector<Eigen::MatrixXd> a;    // a_l, n_{l+1} x cap (output layer unused)
+    std::vector<Eigen::MatrixXd> dg;   // g'(a_l), hidden layers
+    std::vector<Eigen::MatrixXd> ddg;  // g''(a_l), hidden layers (Jacobian mode)
+    std::vector<Eigen::MatrixXd> u;    // U_l, n_{l+1} x n_0 cap (Jacobian mode)
+    std::vector<Eigen::MatrixXd> z;    // Z_l, n_l x n_0 cap, l >= 1 (Jacobian mode)
+    Eigen::MatrixXd abar[2], hbar, dbar, ubar[2], zbar;
+    Eigen::VectorXd grad;
+    int count = 0;                 // samples in this chunk after the last Forward
+    bool has_jacobian = false;     // whether the last Forward built the chain
+    bool allocated_jacobian = false;
+    int allocated_cap = 0;
+
+    void Allocate(const MlpArchitecture& arch, int cap, bool jacobian) {
+      if (allocated_cap == cap && (allocated_jacobian || !jacobian)) return;
+      const int layers = arch.num_layers();
+      const int n0 = arch.num_inputs();
+      const int width = arch.max_width();
+      h.resize(layers);
+      a.resize(layers);
+      dg.resize(layers);
+      for (int l = 0; l < layers; ++l) {
+        h[l].resize(arch.sizes[l], cap);
+        a[l].resize(arch.sizes[l + 1], cap);
+        dg[l].resize(arch.sizes[l + 1], cap);
+      }
+      abar[0].resize(width, cap);
+      abar[1].resize(width, cap);
+      hbar.resize(width, cap);
+      grad.resize(arch.num_parameters());
+      if (jacobian) {
+        ddg.resize(layers);
+        u.resize(layers);
+        z.resize(layers);
+        for (int l = 0; l < layers; ++l) {
+          ddg[l].resize(arch.sizes[l + 1], cap);
+          u[l].resize(arch.sizes[l + 1], Eigen::Index(n0) * cap);
+          z[l].resize(arch.sizes[l], Eigen::Index(n0) * cap);
+        }
+        dbar.resize(width, cap);
+        zbar.resize(width, Eigen::Index(n0) * cap);
+      }
+      // ubar also holds the n_L stacked sweeps of InputJacobianReverse.
+      const Eigen::Index sweeps = Eigen::Index(std::max(n0, arch.num_outputs())) * cap;
+      ubar[0].resize(width, sweeps);
+      ubar[1].resize(width, sweeps);
+      allocated_cap = cap;
+      allocated_jacobian = jacobian;
+    }
+  };
+
+  MlpArchitecture arch_;
+  int chunk_size_ = kDefaultChunkSize;
+  bool jacobian_ = false;
+  int batch_ = 0;  // batch size of the last Forward
+  std::vector<Chunk> chunks_;
+};
+
+/// A fully connected network with hidden activations and a linear output, held as
+/// its architecture plus one flat parameter vector of scalar type T (double, or a
+/// ceres::Jet to differentiate with respect to parameters). Immutable during
+/// evaluation: scratch lives in an MlpWorkspace.
+template <typename T>
+class Mlp {
+ public:
+  using Scalar = T;
+  using VectorT = Eigen::Matrix<T, Eigen::Dynamic, 1>;
+  /// Scalar of T * S (a Jet if either is a Jet).
+  template <typename S>
+  using ResultScalar = decltype(std::declval<T>() * std::declval<S>());
+
+  Mlp() = default;
+  /// Network with all parameters zero.
+  explicit Mlp(MlpArchitecture arch) : arch_(std::move(arch)) {
+    arch_.Validate();
+    params_ = VectorT::Zero(arch_.num_parameters());
+  }
+  /// Network with the flat parameters theta (size num_parameters()).
+  Mlp(MlpArchitecture arch, VectorT theta) : arch_(std::move(arch)), params_(std::move(theta)) {
+    arch_.Validate();
+    DIFFDYN_CHECK(params_.size() == arch_.num_parameters(), "MLP expects ",
+                  arch_.num_parameters(), " parameters, got ", params_.size());
+  }
+
+  const MlpArchitecture& architecture() const { return arch_; }
+  int num_inputs() const { return arch_.num_inputs(); }
+  int num_outputs() const { return arch_.num_outputs(); }
+  Eigen::Index num_parameters() const { return params_.size(); }
+  /// The flat parameters theta.
+  const VectorT& parameters() const { return params_; }
+  /// Mutable flat parameters (for optimisers; do not resize).
+  VectorT& mutable_parameters() { return params_; }
+  /// Replaces theta; the size must stay num_parameters().
+  void set_parameters(const VectorT& theta) {
+    DIFFDYN_CHECK(theta.size() == params_.size(), "MLP expects ", params_.size(),
+                  " parameters, got ", theta.size());
+    params_ = theta;
+  }
+
+  /// W_l (n_{l+1} x n_l), a view into theta.
+  Eigen::Map<const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>> W(int l) const {
+    return {params_.data() + arch_.WeightOffset(l), arch_.sizes[l + 1], arch_.sizes[l]};
+  }
+  /// b_l (n_{l+1}), a view into theta.
+  Eigen::Map<const VectorT> b(int l) const {
+    return {params_.data() + arch_.BiasOffset(l), arch_.sizes[l + 1]};
+  }
+
+  /// A copy with parameters converted to U (e.g. double -> Jet to seed
+  /// derivatives with respect to some parameters).
+  template <typename U>
+  Mlp<U> cast() const {
+    return Mlp<U>(arch_, params_.template cast<U>());
+  }
+
+  // ---------------------------------------------------------------------------
+  // Single sample, generic scalar.
+
+  /// y = f(x) for one input x (size n_0) of scalar S; the result scalar is
+  /// the product type of T and S (Jet if either is a Jet).
+  template <typename Derived>
+  auto operator()(const Eigen::MatrixBase<Derived>& x) const {
+    using R = ResultScalar<typename Derived::Scalar>;
+    CheckInput(x.size());
+    Eigen::Matrix<R, Eigen::Dynamic, 1> h = x.template cast<R>();
+    for (int l = 0; l < arch_.num_layers(); ++l) {
+      Eigen::Matrix<R, Eigen::Dynamic, 1> a = W(l).template cast<R>() * h + b(l).template cast<R>();
+      if (l + 1 < arch_.num_layers()) {
+        for (Eigen::Index i = 0; i < a.size(); ++i) a[i] = ActivationValue(arch_.activations[l], a[i]);
+      }
+      h = std::move(a);
+    }
+    return h;
+  }
+
+  /// Value y (n_L) and closed-form input Jacobian J = dy/dx (n_L x n_0) of one
+  /// sample in one forward pass (U_l = W_l Z_l, Z_{l+1} = diag(g'(a_l)) U_l).
+  /// With Jet inputs, J carries the derivatives of the Jacobian (Hessians).
+  template <typename Derived, typename R = ResultScalar<typename Derived::Scalar>>
+  void ValueAndJacobian(const Eigen::MatrixBase<Derived>& x, Eigen::Matrix<R, Eigen::Dynamic, 1>* y,
+                        Eigen::Matrix<R, Eigen::Dynamic, Eigen::Dynamic>* jac) const {
+    CheckInput(x.size());
+    using Vec = Eigen::Matrix<R, Eigen::Dynamic, 1>;
+    using Mat = Eigen::Matrix<R, Eigen::Dynamic, Eigen::Dynamic>;
+    Vec h = x.template cast<R>();
+    Mat z = Mat::Identity(num_inputs(), num_inputs());
+    for (int l = 0; l < arch_.num_layers(); ++l) {
+      const Mat w = W(l).template cast<R>();
+      Vec a = w * h + b(l).template cast<R>();
+      Mat u = w * z;
+      if (l + 1 < arch_.num_layers()) {
+        const Activation& act = arch_.activations[l];
+        for (Eigen::Index i = 0; i < a.size(); ++i) {
+          u.row(i) *= ActivationDerivative(act, a[i]);
+          a[i] = ActivationValue(act, a[i]);
+        }
+      }
+      h = std::move(a);
+      z = std::move(u);
+    }
+    if (y) *y = std::move(h);
+    if (jac) *jac = std::move(z);
+  }
+
+  /// Closed-form second derivatives of one sample (double only):
+  /// hessians[k](i, j) = d^2 y_k / dx_i dx_j, k < n_L, each n_0 x n_0, via the
+  /// second-order chain S_{l+1} = g''(a) .* (U e_i) .* (U e_j) + g'(a) .* W_l S_l.
+  /// y and jac may be null.
+  void ValueJacobianHessian(const Eigen::VectorXd& x, Eigen::VectorXd* y, Eigen::MatrixXd* jac,
+                            std::vector<Eigen::MatrixXd>* hessians) const
+    requires std::is_same_v<T, double>
+  {
+    CheckInput(x.size());
+    const int n0 = num_inputs();
+    Eigen::VectorXd h = x;
+    Eigen::MatrixXd z = Eigen::MatrixXd::Identity(n0, n0);
+    Eigen::MatrixXd s = Eigen::MatrixXd::Zero(n0, n0 * n0);  // column i*n0+j: d2h/dxi dxj
+    for (int l = 0; l < arch_.num_layers(); ++l) {
+      Eigen::VectorXd a = W(l) * h + b(l);
+      Eigen::MatrixXd u = W(l) * z;
+      Eigen::MatrixXd v = W(l) * s;
+      if (l + 1 < arch_.num_layers()) {
+        const Activation& act = arch_.activations[l];
+        for (Eigen::Index r = 0; r < a.size(); ++r) {
+          const double d1 = ActivationDerivative(act, a[r]);
+          const double d2 = ActivationSecondDerivative(act, a[r]);
+          for (int i = 0; i < n0; ++i) {
+            for (int j = 0; j < n0; ++j) {
+              v(r, i * n0 + j) = d2 * u(r, i) * u(r, j) + d1 * v(r, i * n0 + j);
+            }
+          }
+          u.row(r) *= d1;
+          a[r] = ActivationValue(act, a[r]);
+        }
+      }
+      h = std::move(a);
+      z = std::move(u);
+      s = std::move(v);
+    }
+    if (y) *y = h;
+    if (jac) *jac = z;
+    if (hessians) {
+      hessians->assign(num_outputs(), Eigen::MatrixXd(n0, n0));
+      for (int k = 0; k < num_outputs(); ++k) {
+        for (int i = 0; i < n0; ++i) {
+          for (int j = 0; j < n0; ++j) (*hessians)[k](i, j) = s(k, i * n0 + j);
+        }
+      }
+    }
+  }
+
+  // ---------------------------------------------------------------------------
+  // Batched double paths (samples in columns).
+
+  /// Forward pass over the batch X (n_0 x B): Y = f(X) (n_L x B) and, if `jac`
+  /// is not null, the stacked input Jacobians J = [J_1 ... J_B] (n_L x n_0 B).
+  /// Stores what Backward needs in `ws` (which must not be used concurrently).
+  /// Work is split in chunks of ws->chunk_size() samples over `threads` threads
+  /// (<= 0: all cores). Y, jac are resized (allocation only if their size changes).
+  void Forward(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y, Eigen::MatrixXd* jac,
+               MlpWorkspace* ws, int threads = 1) const
+    requires std::is_same_v<T, double>
+  {
+    DIFFDYN_CHECK(X.rows() == num_inputs(), "MLP expects inputs with ", num_inputs(),
+                  " rows, got ", X.rows());
+    DIFFDYN_CHECK(ws != nullptr && Y != nullptr, "Mlp::Forward needs Y and a workspace");
+    const int batch = static_cast<int>(X.cols());
+    const int n0 = num_inputs();
+    ws->Reserve(arch_, batch, jac != nullptr);
+    ws->batch_ = batch;
+    if (Y->rows() != num_outputs() || Y->cols() != batch) Y->resize(num_outputs(), batch);
+    if (jac && (jac->rows() != num_outputs() || jac->cols() != Eigen::Index(n0) * batch)) {
+      jac->resize(num_outputs(), Eigen::Index(n0) * batch);
+    }
+    ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
+      ForwardChunk(X.middleCols(begin, end - begin), Y->middleCols(begin, end - begin),
+                   jac ? &*jac : nullptr, begin, &ws->chunks_[c]);
+    });
+  }
+
+  /// Reverse mode after Forward(X, ...) on the same workspace. Given cotangents
+  /// gy = dL/dY (n_L x B, or empty for none) and gjac = dL/dJ (n_L x n_0 B in
+  /// the layout of Forward's J, or empty for none; needs Forward with J), writes
+  /// grad_params = dL/dtheta (num_parameters(), summed over the batch) and, if
+  /// not null, grad_inputs = dL/dX (n_0 x B). Either output may be null.
+  void Backward(const Eigen::MatrixXd& gy, const Eigen::MatrixXd& gjac,
+                Eigen::VectorXd* grad_params, Eigen::MatrixXd* grad_inputs, MlpWorkspace* ws,
+                int threads = 1) const
+    requires std::is_same_v<T, double>
+  {
+    DIFFDYN_CHECK(ws != nullptr, "Mlp::Backward needs a workspace");
+    const int batch = ws->batch_;
+    const int n0 = num_inputs();
+    const bool has_gy = gy.size() > 0;
+    const bool has_gj = gjac.size() > 0;
+    DIFFDYN_CHECK(!has_gy || (gy.rows() == num_outputs() && gy.cols() == batch),
+                  "Mlp::Backward: output cotangent is ", gy.rows(), " x ", gy.cols(),
+                  ", expected ", num_outputs(), " x ", batch);
+    DIFFDYN_CHECK(!has_gj || (gjac.rows() == num_outputs() &&
+                              gjac.cols() == Eigen::Index(n0) * batch),
+                  "Mlp::Backward: Jacobian cotangent is ", gjac.rows(), " x ", gjac.cols(),
+                  ", expected ", num_outputs(), " x ", Eigen::Index(n0) * batch);
+    DIFFDYN_CHECK(!has_gj || batch == 0 || ws->chunks_[0].has_jacobian,
+                  "Mlp::Backward: a Jacobian cotangent needs Forward with a Jacobian");
+    if (grad_inputs && (grad_inputs->rows() != n0 || grad_inputs->cols() != batch)) {
+      grad_inputs->resize(n0, batch);
+    }
+    const int chunks = NumChunks(batch, ws->chunk_size());
+    ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
+      BackwardChunk(has_gy ? &gy : nullptr, has_gj ? &gjac : nullptr, begin, end - begin,
+                    grad_params != nullptr, grad_inputs, &ws->chunks_[c]);
+    });
+    // Chunk gradients summed in chunk order: identical at any thread count.
+    if (grad_params) {
+      if (grad_params->size() != num_parameters()) grad_params->resize(num_parameters());
+      grad_params->setZero();
+      for (int c = 0; c < chunks; ++c) *grad_params += ws->chunks_[c].grad;
+    }
+  }
+
+  /// Input Jacobians by batched reverse mode (n_L backward sweeps stacked into
+  /// one): J = [J_1 ... J_B] (n_L x n_0 B), same layout as Forward's, and
+  /// Y = f(X). Cheaper than the forward chain when n_L < n_0.
+  void InputJacobianReverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y, Eigen::MatrixXd* jac,
+                            MlpWorkspace* ws, int threads = 1) const
+    requires std::is_same_v<T, double>
+  {
+    DIFFDYN_CHECK(jac != nullptr, "Mlp::InputJacobianReverse needs an output Jacobian");
+    Forward(X, Y, nullptr, ws, threads);
+    const int batch = static_cast<int>(X.cols());
+    const int n0 = num_inputs();
+    const int m = num_outputs();
+    if (jac->rows() != m || jac->cols() != Eigen::Index(n0) * batch) {
+      jac->resize(m, Eigen::Index(n0) * batch);
+    }
+    const int cap = ws->chunk_size();
+    const int L = arch_.num_layers();
+    ParallelForChunks(batch, cap, threads, [&](int c, int begin, int end) {
+      MlpWorkspace::Chunk& ch = ws->chunks_[c];
+      const int nb = end - begin;
+      // The m sweeps of each sample side by side: column b*m + k is output k
+      // of sample b (workspace buffers ubar hold max(n_0, n_L) cap columns).
+      Eigen::MatrixXd* cur = &ch.ubar[0];
+      Eigen::MatrixXd* nxt = &ch.ubar[1];
+      const Eigen::Index sweeps = Eigen::Index(m) * nb;
+      int rows = arch_.sizes[L - 1];
+      // Cotangent of the last hidden pre-activation: W_{L-1}^T e_k .* g'(a_{L-2}).
+      for (int bb = 0; bb < nb; ++bb) {
+        for (int k = 0; k < m; ++k) {
+          auto col = cur->col(Eigen::Index(bb) * m + k).head(rows);
+          if (L >= 2) {
+            col = W(L - 1).row(k).transpose().cwiseProduct(ch.dg[L - 2].col(bb));
+          } else {
+            col = W(0).row(k).transpose();
+          }
+        }
+      }
+      // Hidden layers: abar_{l-1} = (W_l^T abar_l) .* g'(a_{l-1}), one GEMM each.
+      for (int l = L - 2; l >= 1; --l) {
+        const int rows_in = arch_.sizes[l];
+        nxt->topLeftCorner(rows_in, sweeps).noalias() =
+            W(l).transpose() * cur->topLeftCorner(rows, sweeps);
+        for (int bb = 0; bb < nb; ++bb) {
+          nxt->block(0, Eigen::Index(bb) * m, rows_in, m).array().colwise() *=
+              ch.dg[l - 1].col(bb).array();
+        }
+        std::swap(cur, nxt);
+        rows = rows_in;
+      }
+      // dy_k/dx = W_0^T abar_0, transposed into the layout of J.
+      if (L >= 2) {
+        nxt->topLeftCorner(n0, sweeps).noalias() = W(0).transpose() * cur->topLeftCorner(rows, sweeps);
+        std::swap(cur, nxt);
+      }
+      for (int bb = 0; bb < nb; ++bb) {
+        jac->middleCols(Eigen::Index(begin + bb) * n0, n0) =
+            cur->block(0, Eigen::Index(bb) * m, n0, m).transpose();
+      }
+    });
+  }
+
+ private:
+
+  void CheckInput(Eigen::Index n) const {
+    DIFFDYN_CHECK(n == num_inputs(), "MLP expects ", num_inputs(), " inputs, got ", n);
+  }
+
+  // Forward over one chunk; jac (full-batch matrix) is written at sample offset `begin`.
+  template <typename XBlock, typename YBlock>
+  void ForwardChunk(const XBlock& x, YBlock y, Eigen::MatrixXd* jac, int begin,
+                    MlpWorkspace::Chunk* ch) const {
+    const int nb = static_cast<int>(x.cols());
+    const int L = arch_.num_layers();
+    const int n0 = num_inputs();
+    const Eigen::Index nz = Eigen::Index(n0) * nb;
+    ch->count = nb;
+    ch->has_jacobian = jac != nullptr;
+    ch->h[0].leftCols(nb) = x;
+    for (int l = 0; l < L; ++l) {
+      const int rows = arch_.sizes[l + 1];
+      auto a = ch->a[l].leftCols(nb);
+      a.noalias() = W(l) * ch->h[l].leftCols(nb);
+      a.colwise() += b(l);
+      if (l + 1 < L) {
+        ApplyActivation(arch_.activations[l], a.data(), a.size(), ch->h[l + 1].data(),
+                        ch->dg[l].data(), jac ? ch->ddg[l].data() : nullptr);
+      } else {
+        y = a;
+      }
+      if (!jac) continue;
+      // Jacobian chain: U_0 = W_0 per sample, U_l = W_l Z_l; Z_{l+1} = diag(g') U_l.
+      auto u = ch->u[l].topLeftCorner(rows, nz);
+      if (l == 0) {
+        for (int bb = 0; bb < nb; ++bb) u.middleCols(Eigen::Index(bb) * n0, n0) = W(0);
+      } else {
+        u.noalias() = W(l) * ch->z[l].topLeftCorner(arch_.sizes[l], nz);
+      }
+      if (l + 1 < L) {
+        auto z = ch->z[l + 1].topLeftCorner(rows, nz);
+        for (int bb = 0; bb < nb; ++bb) {
+          z.middleCols(Eigen::Index(bb) * n0, n0) =
+              u.middleCols(Eigen::Index(bb) * n0, n0).array().colwise() * ch->dg[l].col(bb).array();
+        }
+      } else {
+        jac->middleCols(Eigen::Index(begin) * n0, nz) = u;
+      }
+    }
+  }
+
+  // Reverse sweep over one chunk of nb samples starting at `begin`.
+  void BackwardChunk(const Eigen::MatrixXd* gy, const Eigen::MatrixXd* gjac, int begin, int nb,
+                     bool want_params, Eigen::MatrixXd* grad_inputs,
+                     MlpWorkspace::Chunk* ch) const {
+    const int L = arch_.num_layers();
+    const int n0 = num_inputs();
+    const Eigen::Index nz = Eigen::Index(n0) * nb;
+    int cur = 0;
+    const int m = num_outputs();
+    auto abar = [&](int which, int rows) { return ch->abar[which].topLeftCorner(rows, nb); };
+    auto ubar = [&](int which, int rows) { return ch->ubar[which].topLeftCorner(rows, nz); };
+    if (gy) {
+      abar(cur, m) = gy->middleCols(begin, nb);
+    } else {
+      abar(cur, m).setZero();
+    }
+    if (gjac) ubar(cur, m) = gjac->middleCols(Eigen::Index(begin) * n0, nz);
+    for (int l = L - 1; l >= 0; --l) {
+      const int rows = arch_.sizes[l + 1];
+      const int cols = arch_.sizes[l];
+      // Parameter gradients of layer l.
+      if (want_params) {
+        Eigen::Map<Eigen::MatrixXd> gw(ch->grad.data() + arch_.WeightOffset(l), rows, cols);
+        Eigen::Map<Eigen::VectorXd> gb(ch->grad.data() + arch_.BiasOffset(l), rows);
+        gw.noalias() = abar(cur, rows) * ch->h[l].leftCols(nb).transpose();
+        gb = abar(cur, rows).rowwise().sum();
+        if (gjac) {
+          if (l == 0) {
+            for (int bb = 0; bb < nb; ++bb) gw += ubar(cur, rows).middleCols(Eigen::Index(bb) * n0, n0);
+          } else {
+            gw.noalias() += ubar(cur, rows) * ch->z[l].topLeftCorner(cols, nz).transpose();
+          }
+        }
+      }
+      if (l == 0) {
+        if (grad_inputs) {
+          grad_inputs->middleCols(begin, nb).noalias() = W(0).transpose() * abar(cur, rows);
+        }
+        break;
+      }
+      // Cotangents of layer l-1: hbar = W^T abar; zbar = W^T ubar.
+      const int nxt = 1 - cur;
+      auto hbar = ch->hbar.topLeftCorner(cols, nb);
+      hbar.noalias() = W(l).transpose() * abar(cur, rows);
+      auto next_abar = abar(nxt, cols);
+      next_abar = hbar.cwiseProduct(ch->dg[l - 1].leftCols(nb));
+      if (gjac) {
+        auto zbar = ch->zbar.topLeftCorner(cols, nz);
+        zbar.noalias() = W(l).transpose() * ubar(cur, rows);
+        const auto u_prev = ch->u[l - 1].topLeftCorner(cols, nz);
+        auto dbar = ch->dbar.topLeftCorner(cols, nb);
+        auto next_ubar = ubar(nxt, cols);
+        for (int bb = 0; bb < nb; ++bb) {
+          const Eigen::Index c0 = Eigen::Index(bb) * n0;
+          dbar.col(bb) = zbar.middleCols(c0, n0).cwiseProduct(u_prev.middleCols(c0, n0)).rowwise().sum();
+          next_ubar.middleCols(c0, n0) =
+              zbar.middleCols(c0, n0).array().colwise() * ch->dg[l - 1].col(bb).array();
+        }
+        next_abar += dbar.cwiseProduct(ch->ddg[l - 1].leftCols(nb));
+      }
+      cur = nxt;
+    }
+  }
+
+  MlpArchitecture arch_;
+  VectorT params_;
+};
+
+}  // namespace diffdyn

@@ -1,0 +1,105 @@
+// Activations: g' and g'' against Jets and central differences; batched path
+// against the scalar path; softplus stability.
+#include "diffdyn/models/activations.h"
+
+#include <cmath>
+#include <vector>
+
+#include <ceres/jet.h>
+#include <gtest/gtest.h>
+
+namespace diffdyn {
+namespace {
+
+using Jet1 = ceres::Jet<double, 1>;
+
+std::vector<Activation> AllActivations() {
+  return {Activation::Linear(), Activation::Relu(),    Activation::Softplus(),
+          Activation::Softplus(3.0), Activation::Tanh(), Activation::Sigmoid(),
+          Activation::Elu(0.7),  Activation::Cos(),     Activation::Cos(2.0 * M_PI)};
+}
+
+// Points away from relu's and elu's kink at 0.
+const std::vector<double> kPoints = {-7.3, -2.1, -0.6, -0.05, 0.03, 0.4, 1.7, 6.2, 25.0, -30.0};
+
+TEST(Activations, FirstDerivativeMatchesJetAndCentralDifference) {
+  for (const Activation& act : AllActivations()) {
+    for (double a : kPoints) {
+      const double dg = ActivationDerivative(act, a);
+      const Jet1 jet = ActivationValue(act, Jet1(a, 0));
+      EXPECT_NEAR(dg, jet.v[0], 1e-12) << ActivationName(act.kind) << " at " << a;
+      const double h = 1e-6;
+      const double fd = (ActivationValue(act, a + h) - ActivationValue(act, a - h)) / (2 * h);
+      EXPECT_NEAR(dg, fd, 1e-6) << ActivationName(act.kind) << " at " << a;
+    }
+  }
+}
+
+TEST(Activations, SecondDerivativeMatchesJetAndCentralDifference) {
+  for (const Activation& act : AllActivations()) {
+    for (double a : kPoints) {
+      const double ddg = ActivationSecondDerivative(act, a);
+      const Jet1 jet = ActivationDerivative(act, Jet1(a, 0));
+      EXPECT_NEAR(ddg, jet.v[0], 1e-12) << ActivationName(act.kind) << " at " << a;
+      const double h = 1e-6;
+      const double fd =
+          (ActivationDerivative(act, a + h) - ActivationDerivative(act, a - h)) / (2 * h);
+      EXPECT_NEAR(ddg, fd, 1e-6) << ActivationName(act.kind) << " at " << a;
+    }
+  }
+}
+
+TEST(Activations, BatchedMatchesScalar) {
+  // 150 points (more than one internal block of 64), including the kink.
+  Eigen::ArrayXd a(150);
+  for (int i = 0; i < a.size(); ++i) a[i] = -12.0 + 24.0 * i / 149.0 + (i == 75 ? 0.0 : 0.01);
+  a[10] = 0.0;
+  for (const Activation& act : AllActivations()) {
+    Eigen::ArrayXd g(a.size()), dg(a.size()), ddg(a.size());
+    ApplyActivation(act, a.data(), a.size(), g.data(), dg.data(), ddg.data());
+    for (int i = 0; i < a.size(); ++i) {
+      const double scale = 1.0 + std::abs(ActivationValue(act, a[i]));
+      EXPECT_NEAR(g[i], ActivationValue(act, a[i]), 1e-14 * scale) << ActivationName(act.kind);
+      EXPECT_NEAR(dg[i], ActivationDerivative(act, a[i]), 1e-14 * (1 + act.param))
+          << ActivationName(act.kind);
+      EXPECT_NEAR(ddg[i], ActivationSecondDerivative(act, a[i]), 1e-13 * (1 + act.param * act.param))
+          << ActivationName(act.kind);
+    }
+    // In place, values only.
+    Eigen::ArrayXd inplace = a;
+    ApplyActivation(act, inplace.data(), inplace.size(), inplace.data(), nullptr, nullptr);
+    EXPECT_TRUE(inplace.isApprox(g, 1e-15) || (inplace - g).abs().maxCoeff() < 1e-15);
+  }
+}
+
+TEST(Activations, ReluKinkHasZeroDerivative) {
+  EXPECT_EQ(ActivationDerivative(Activation::Relu(), 0.0), 0.0);
+  EXPECT_EQ(ActivationValue(Activation::Relu(), -3.0), 0.0);
+}
+
+TEST(Activations, SoftplusIsStableForLargeInputs) {
+  const Activation sp = Activation::Softplus(2.0);
+  for (double a : {-1e3, -400.0, 400.0, 1e3}) {
+    const double g = ActivationValue(sp, a);
+    EXPECT_TRUE(std::isfinite(g));
+    EXPECT_NEAR(g, std::max(a, 0.0), 1e-12);
+    EXPECT_NEAR(ActivationDerivative(sp, a), a > 0 ? 1.0 : 0.0, 1e-12);
+    EXPECT_TRUE(std::isfinite(ActivationSecondDerivative(sp, a)));
+    double batched = 0.0, d = 0.0, dd = 0.0;
+    ApplyActivation(sp, &a, 1, &batched, &d, &dd);
+    EXPECT_NEAR(batched, std::max(a, 0.0), 1e-12);
+  }
+  // log(2)/beta at 0.
+  EXPECT_NEAR(ActivationValue(sp, 0.0), std::log(2.0) / 2.0, 1e-15);
+}
+
+TEST(Activations, MakeActivationParsesAndRejects) {
+  EXPECT_EQ(MakeActivation("softplus", 2.0), Activation::Softplus(2.0));
+  EXPECT_EQ(MakeActivation("cos"), Activation::Cos());
+  EXPECT_THROW(MakeActivation("swish"), Error);
+  EXPECT_THROW(MakeActivation("softplus", -1.0), Error);
+  EXPECT_THROW(MakeActivation("tanh", NAN), Error);
+}
+
+}  // namespace
+}  // namespace diffdyn

@@ -1,0 +1,347 @@
+// Mlp: closed-form Jacobians and Hessians against Jets and central differences,
+// batched against single-sample paths, reverse mode against Jets and finite
+// differences, thread-count determinism.
+#include "diffdyn/models/mlp.h"
+
+#include <vector>
+
+#include <ceres/jet.h>
+#include <gtest/gtest.h>
+
+#include "diffdyn/autodiff_ode/random.h"
+
+namespace diffdyn {
+namespace {
+
+constexpr int kJetSize = 8;
+using Jet8 = ceres::Jet<double, kJetSize>;
+
+Eigen::VectorXd RandomVector(Eigen::Index n, double scale, Rng& rng) {
+  Eigen::VectorXd v(n);
+  for (Eigen::Index i = 0; i < n; ++i) v[i] = scale * StandardNormal(rng);
+  return v;
+}
+
+Eigen::MatrixXd RandomMatrix(Eigen::Index rows, Eigen::Index cols, double scale, Rng& rng) {
+  Eigen::MatrixXd m(rows, cols);
+  for (Eigen::Index i = 0; i < m.size(); ++i) m.data()[i] = scale * StandardNormal(rng);
+  return m;
+}
+
+// A 3-6-5-2 network with the given hidden activation and random parameters.
+Mlp<double> SmallNet(const Activation& act, std::uint64_t seed) {
+  Rng rng(seed);
+  MlpArchitecture arch{{3, 6, 5, 2}, {act, act}};
+  return Mlp<double>(arch, RandomVector(arch.num_parameters(), 0.6, rng));
+}
+
+std::vector<Activation> AllActivations() {
+  return {Activation::Relu(), Activation::Softplus(), Activation::Softplus(2.5),
+          Activation::Tanh(), Activation::Sigmoid(),  Activation::Elu(0.8),
+          Activation::Cos(),  Activation::Linear()};
+}
+
+// Minimum |a| over all hidden pre-activations of x (to keep relu off its kink).
+double MinAbsPreactivation(const Mlp<double>& net, const Eigen::VectorXd& x) {
+  Eigen::VectorXd h = x;
+  double min_abs = 1e300;
+  for (int l = 0; l + 1 < net.architecture().num_layers(); ++l) {
+    Eigen::VectorXd a = net.W(l) * h + net.b(l);
+    min_abs = std::min(min_abs, a.cwiseAbs().minCoeff());
+    for (Eigen::Index i = 0; i < a.size(); ++i)
+      a[i] = ActivationValue(net.architecture().activations[l], a[i]);
+    h = a;
+  }
+  return min_abs;
+}
+
+// Jacobian of net(x) with Jets seeded on the inputs.
+Eigen::MatrixXd JetJacobian(const Mlp<double>& net, const Eigen::VectorXd& x) {
+  using Jet3 = ceres::Jet<double, 3>;
+  Eigen::Matrix<Jet3, Eigen::Dynamic, 1> xj(3);
+  for (int i = 0; i < 3; ++i) xj[i] = Jet3(x[i], i);
+  const auto y = net(xj);
+  Eigen::MatrixXd jac(y.size(), 3);
+  for (Eigen::Index k = 0; k < y.size(); ++k) jac.row(k) = y[k].v.transpose();
+  return jac;
+}
+
+TEST(Mlp, ClosedFormJacobianMatchesJetsAndCentralDifferences) {
+  Rng rng(7);
+  for (const Activation& act : AllActivations()) {
+    const Mlp<double> net = SmallNet(act, 11);
+    int checked = 0;
+    for (int trial = 0; checked < 5 && trial < 50; ++trial) {
+      const Eigen::VectorXd x = RandomVector(3, 1.0, rng);
+      if (MinAbsPreactivation(net, x) < 1e-3) continue;
+      ++checked;
+      Eigen::VectorXd y;
+      Eigen::MatrixXd jac;
+      net.ValueAndJacobian(x, &y, &jac);
+      EXPECT_LT((y - net(x)).cwiseAbs().maxCoeff(), 1e-14);
+      EXPECT_LT((jac - JetJacobian(net, x)).cwiseAbs().maxCoeff(), 1e-12) << ActivationName(act.kind);
+      const double h = 1e-6;
+      for (int i = 0; i < 3; ++i) {
+        Eigen::VectorXd xp = x, xm = x;
+        xp[i] += h;
+        xm[i] -= h;
+        const Eigen::VectorXd fd = (net(xp) - net(xm)) / (2 * h);
+        EXPECT_LT((jac.col(i) - fd).cwiseAbs().maxCoeff(), 1e-6) << ActivationName(act.kind);
+      }
+    }
+    EXPECT_EQ(checked, 5) << ActivationName(act.kind);
+  }
+}
+
+TEST(Mlp, ClosedFormHessianMatchesJetOfJacobianAndCentralDifferences) {
+  using Jet3 = ceres::Jet<double, 3>;
+  Rng rng(8);
+  for (const Activation& act : AllActivations()) {
+    if (act.kind == ActivationKind::kRelu) continue;  // Hessian is 0; checked below
+    const Mlp<double> net = SmallNet(act, 12);
+    const Eigen::VectorXd x = RandomVector(3, 1.0, rng);
+    Eigen::MatrixXd jac;
+    std::vector<Eigen::MatrixXd> hess;
+    net.ValueJacobianHessian(x, nullptr, &jac, &hess);
+    // Second mode: Jets through the closed-form Jacobian.
+    Eigen::Matrix<Jet3, Eigen::Dynamic, 1> xj(3), yj;
+    for (int i = 0; i < 3; ++i) xj[i] = Jet3(x[i], i);
+    Eigen::Matrix<Jet3, Eigen::Dynamic, Eigen::Dynamic> jj;
+    net.ValueAndJacobian(xj, &yj, &jj);
+    const double h = 1e-5;
+    for (int k = 0; k < 2; ++k) {
+      for (int i = 0; i < 3; ++i) {
+        EXPECT_NEAR(jac(k, i), jj(k, i).a, 1e-14);
+        for (int j = 0; j < 3; ++j) {
+          EXPECT_NEAR(hess[k](i, j), jj(k, i).v[j], 1e-12) << ActivationName(act.kind);
+          Eigen::VectorXd xp = x, xm = x;
+          xp[j] += h;
+          xm[j] -= h;
+          Eigen::MatrixXd jp, jm;
+          net.ValueAndJacobian(xp, static_cast<Eigen::VectorXd*>(nullptr), &jp);
+          net.ValueAndJacobian(xm, static_cast<Eigen::VectorXd*>(nullptr), &jm);
+          EXPECT_NEAR(hess[k](i, j), (jp(k, i) - jm(k, i)) / (2 * h), 1e-6)
+              << ActivationName(act.kind);
+        }
+      }
+      EXPECT_LT((hess[k] - hess[k].transpose()).cwiseAbs().maxCoeff(), 1e-12);
+    }
+  }
+  // relu: piecewise linear, Hessian identically zero.
+  std::vector<Eigen::MatrixXd> hess;
+  SmallNet(Activation::Relu(), 3).ValueJacobianHessian(RandomVector(3, 1.0, rng), nullptr, nullptr, &hess);
+  for (const auto& hk : hess) EXPECT_EQ(hk.cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST(Mlp, BatchedForwardMatchesSingleSample) {
+  Rng rng(9);
+  for (const Activation& act : AllActivations()) {
+    const Mlp<double> net = SmallNet(act, 13);
+    const int batch = 37;
+    const Eigen::MatrixXd X = RandomMatrix(3, batch, 1.0, rng);
+    MlpWorkspace ws(net.architecture(), batch, 16);
+    Eigen::MatrixXd Y, J, Y2, Jr;
+    net.Forward(X, &Y, &J, &ws, 2);
+    net.InputJacobianReverse(X, &Y2, &Jr, &ws, 2);
+    ASSERT_EQ(J.rows(), 2);
+    ASSERT_EQ(J.cols(), 3 * batch);
+    for (int b = 0; b < batch; ++b) {
+      Eigen::VectorXd y;
+      Eigen::MatrixXd jac;
+      net.ValueAndJacobian(Eigen::VectorXd(X.col(b)), &y, &jac);
+      EXPECT_LT((Y.col(b) - y).cwiseAbs().maxCoeff(), 1e-12);
+      EXPECT_LT((J.middleCols(3 * b, 3) - jac).cwiseAbs().maxCoeff(), 1e-12);
+      EXPECT_LT((Jr.middleCols(3 * b, 3) - jac).cwiseAbs().maxCoeff(), 1e-12);
+    }
+    EXPECT_LT((Y2 - Y).cwiseAbs().maxCoeff(), 1e-15);
+  }
+}
+
+// L(theta, X) = sum_b gy_b . y_b + <GJ_b, J_b>, evaluated with Jets seeded on
+// parameters [start, start + 8).
+double JetLossAndGradientBlock(const Mlp<double>& net, const Eigen::MatrixXd& X,
+                               const Eigen::MatrixXd& gy, const Eigen::MatrixXd& gj,
+                               Eigen::Index start, Eigen::VectorXd* grad) {
+  Mlp<Jet8> jnet = net.cast<Jet8>();
+  for (int k = 0; k < kJetSize && start + k < net.num_parameters(); ++k) {
+    jnet.mutable_parameters()[start + k].v[k] = 1.0;
+  }
+  Jet8 loss(0.0);
+  const int n0 = net.num_inputs();
+  for (Eigen::Index b = 0; b < X.cols(); ++b) {
+    Eigen::Matrix<Jet8, Eigen::Dynamic, 1> y;
+    Eigen::Matrix<Jet8, Eigen::Dynamic, Eigen::Dynamic> jac;
+    jnet.ValueAndJacobian(Eigen::VectorXd(X.col(b)), &y, &jac);
+    for (Eigen::Index k = 0; k < y.size(); ++k) {
+      loss += gy(k, b) * y[k];
+      for (int i = 0; i < n0; ++i) loss += gj(k, b * n0 + i) * jac(k, i);
+    }
+  }
+  for (int k = 0; k < kJetSize && start + k < net.num_parameters(); ++k) (*grad)[start + k] = loss.v[k];
+  return loss.a;
+}
+
+double DoubleLoss(const Mlp<double>& net, const Eigen::MatrixXd& X, const Eigen::MatrixXd& gy,
+                  const Eigen::MatrixXd& gj) {
+  double loss = 0.0;
+  for (Eigen::Index b = 0; b < X.cols(); ++b) {
+    Eigen::VectorXd y;
+    Eigen::MatrixXd jac;
+    net.ValueAndJacobian(Eigen::VectorXd(X.col(b)), &y, &jac);
+    loss += gy.col(b).dot(y) + (gj.middleCols(b * net.num_inputs(), net.num_inputs()).cwiseProduct(jac)).sum();
+  }
+  return loss;
+}
+
+void CheckReverseMode(bool jacobian_loss) {
+  Rng rng(jacobian_loss ? 21 : 20);
+  for (const Activation& act : AllActivations()) {
+    const Mlp<double> net = SmallNet(act, 14);
+    const int batch = 9;
+    const Eigen::MatrixXd X = RandomMatrix(3, batch, 1.0, rng);
+    const Eigen::MatrixXd gy = RandomMatrix(2, batch, 1.0, rng);
+    const Eigen::MatrixXd gj =
+        jacobian_loss ? RandomMatrix(2, 3 * batch, 1.0, rng) : Eigen::MatrixXd::Zero(2, 3 * batch);
+    MlpWorkspace ws(net.architecture(), batch, 4);
+    Eigen::MatrixXd Y, J, gx;
+    Eigen::VectorXd grad;
+    net.Forward(X, &Y, jacobian_loss ? &J : nullptr, &ws);
+    net.Backward(gy, jacobian_loss ? gj : Eigen::MatrixXd(), &grad, &gx, &ws);
+
+    // Mode 2: Jets on the parameters, blocks of 8.
+    Eigen::VectorXd jet_grad(net.num_parameters());
+    for (Eigen::Index s = 0; s < net.num_parameters(); s += kJetSize) {
+      JetLossAndGradientBlock(net, X, gy, gj, s, &jet_grad);
+    }
+    const double scale = jet_grad.cwiseAbs().maxCoeff();
+    EXPECT_GT(scale, 1e-3);
+    EXPECT_LT((grad - jet_grad).cwiseAbs().maxCoeff(), 1e-8 * scale) << ActivationName(act.kind);
+
+    // Mode 3: central differences on every parameter.
+    const double h = 1e-5;
+    double fd_err = 0.0;
+    for (Eigen::Index p = 0; p < net.num_parameters(); ++p) {
+      Mlp<double> plus = net, minus = net;
+      plus.mutable_parameters()[p] += h;
+      minus.mutable_parameters()[p] -= h;
+      const double fd = (DoubleLoss(plus, X, gy, gj) - DoubleLoss(minus, X, gy, gj)) / (2 * h);
+      fd_err = std::max(fd_err, std::abs(fd - grad[p]));
+    }
+    // relu is piecewise linear in theta: exact unless a step crosses a kink.
+    EXPECT_LT(fd_err, 1e-8 * scale) << ActivationName(act.kind);
+
+    // Input gradient against central differences in x.
+    for (int b = 0; b < batch; b += 4) {
+      for (int i = 0; i < 3; ++i) {
+        Eigen::MatrixXd xp = X, xm = X;
+        xp(i, b) += h;
+        xm(i, b) -= h;
+        const double fd = (DoubleLoss(net, xp, gy, gj) - DoubleLoss(net, xm, gy, gj)) / (2 * h);
+        EXPECT_NEAR(gx(i, b), fd, 1e-7 * (1.0 + std::abs(fd))) << ActivationName(act.kind);
+      }
+    }
+  }
+}
+
+TEST(Mlp, ReverseModeValueLossMatchesJetsAndFiniteDifferences) { CheckReverseMode(false); }
+
+TEST(Mlp, ReverseModeJacobianLossMatchesJetsAndFiniteDifferences) { CheckReverseMode(true); }
+
+TEST(Mlp, InputGradientMatchesJetsWithoutJacobianLoss) {
+  using Jet3 = ceres::Jet<double, 3>;
+  Rng rng(31);
+  const Mlp<double> net = SmallNet(Activation::Tanh(), 15);
+  const Eigen::MatrixXd X = RandomMatrix(3, 5, 1.0, rng);
+  const Eigen::MatrixXd gy = RandomMatrix(2, 5, 1.0, rng);
+  MlpWorkspace ws(net.architecture(), 5);
+  Eigen::MatrixXd Y, gx;
+  net.Forward(X, &Y, nullptr, &ws);
+  net.Backward(gy, Eigen::MatrixXd(), nullptr, &gx, &ws);
+  for (int b = 0; b < 5; ++b) {
+    Eigen::Matrix<Jet3, Eigen::Dynamic, 1> xj(3);
+    for (int i = 0; i < 3; ++i) xj[i] = Jet3(X(i, b), i);
+    const auto y = net(xj);
+    Jet3 l(0.0);
+    for (int k = 0; k < 2; ++k) l += gy(k, b) * y[k];
+    for (int i = 0; i < 3; ++i) EXPECT_NEAR(gx(i, b), l.v[i], 1e-13);
+  }
+}
+
+TEST(Mlp, ResultsIdenticalAtAnyThreadCount) {
+  Rng rng(41);
+  MlpArchitecture arch{{6, 40, 30, 4}, {Activation::Softplus(), Activation::Tanh()}};
+  const Mlp<double> net(arch, RandomVector(arch.num_parameters(), 0.3, rng));
+  const int batch = 700;
+  const Eigen::MatrixXd X = RandomMatrix(6, batch, 1.0, rng);
+  const Eigen::MatrixXd gy = RandomMatrix(4, batch, 1.0, rng);
+  const Eigen::MatrixXd gj = RandomMatrix(4, 6 * batch, 1.0, rng);
+  Eigen::VectorXd reference;
+  Eigen::MatrixXd reference_gx;
+  for (int threads : {1, 2, 3, 5}) {
+    MlpWorkspace ws(arch, batch, 128);
+    Eigen::MatrixXd Y, J, gx;
+    Eigen::VectorXd grad;
+    net.Forward(X, &Y, &J, &ws, threads);
+    net.Backward(gy, gj, &grad, &gx, &ws, threads);
+    if (threads == 1) {
+      reference = grad;
+      reference_gx = gx;
+    } else {
+      EXPECT_TRUE(grad == reference) << threads << " threads";
+      EXPECT_TRUE(gx == reference_gx) << threads << " threads";
+    }
+  }
+  // A different chunking sums in another order: equal to rounding only.
+  MlpWorkspace ws(arch, batch, 1000);
+  Eigen::MatrixXd Y, J;
+  Eigen::VectorXd grad;
+  net.Forward(X, &Y, &J, &ws);
+  net.Backward(gy, gj, &grad, nullptr, &ws);
+  EXPECT_LT((grad - reference).cwiseAbs().maxCoeff(), 1e-10 * reference.cwiseAbs().maxCoeff());
+}
+
+TEST(Mlp, WorkspaceReuseAcrossBatchSizes) {
+  Rng rng(51);
+  const Mlp<double> net = SmallNet(Activation::Softplus(), 16);
+  MlpWorkspace ws(net.architecture(), 10, 8);
+  for (int batch : {10, 3, 25, 1}) {
+    const Eigen::MatrixXd X = RandomMatrix(3, batch, 1.0, rng);
+    Eigen::MatrixXd Y;
+    net.Forward(X, &Y, nullptr, &ws);
+    for (int b = 0; b < batch; ++b) {
+      EXPECT_LT((Y.col(b) - net(Eigen::VectorXd(X.col(b)))).cwiseAbs().maxCoeff(), 1e-13);
+    }
+  }
+}
+
+TEST(Mlp, CastKeepsArchitectureAndValues) {
+  const Mlp<double> net = SmallNet(Activation::Elu(), 17);
+  const Mlp<Jet8> jnet = net.cast<Jet8>();
+  EXPECT_EQ(jnet.architecture(), net.architecture());
+  const Eigen::Vector3d x(0.1, -0.4, 0.9);
+  const auto yj = jnet(x);
+  const Eigen::VectorXd y = net(x);
+  for (int k = 0; k < 2; ++k) {
+    EXPECT_DOUBLE_EQ(yj[k].a, y[k]);
+    EXPECT_EQ(yj[k].v.norm(), 0.0);
+  }
+}
+
+TEST(Mlp, RejectsWrongSizes) {
+  MlpArchitecture arch{{2, 3, 1}, {Activation::Tanh()}};
+  EXPECT_THROW(Mlp<double>(arch, Eigen::VectorXd::Zero(5)), Error);
+  EXPECT_THROW(Mlp<double>(MlpArchitecture{{2, 3, 1}, {}}), Error);
+  const Mlp<double> net(arch);
+  EXPECT_EQ(net.num_parameters(), 3 * 3 + 4);
+  EXPECT_THROW(net(Eigen::Vector3d::Zero()), Error);
+  MlpWorkspace ws(arch, 4);
+  Eigen::MatrixXd Y;
+  EXPECT_THROW(net.Forward(Eigen::MatrixXd::Zero(3, 4), &Y, nullptr, &ws), Error);
+  net.Forward(Eigen::MatrixXd::Zero(2, 4), &Y, nullptr, &ws);
+  Eigen::VectorXd grad;
+  EXPECT_THROW(net.Backward(Eigen::MatrixXd::Zero(1, 5), Eigen::MatrixXd(), &grad, nullptr, &ws), Error);
+  EXPECT_THROW(net.Backward(Eigen::MatrixXd(), Eigen::MatrixXd::Zero(1, 8), &grad, nullptr, &ws), Error);
+}
+
+}  // namespace
+}  // namespace diffdyn
