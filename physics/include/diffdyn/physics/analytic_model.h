@@ -1,0 +1,238 @@
+// Analytic rigid-body models: one interface for inverse and forward dynamics.
+//
+// A robot with n joints obeys the manipulator equation
+//
+//   tau = ID(q, qd, qdd; p) = M(q; p) qdd + c(q, qd; p) + g(q; p),
+//
+// with q, qd, qdd, tau in R^n and p the model's named physical parameters
+// (masses, lengths, gravity). Inverse dynamics ID is the primitive: it is
+// linear in qdd, so the mass matrix and the forward dynamics follow from it,
+//
+//   M(q) e_i = ID(q, 0, e_i) - ID(q, 0, 0)          (column i, n + 1 calls),
+//   qdd = FD(q, qd, tau) = M(q)^{-1} (tau - ID(q, qd, 0)).
+//
+// Each concrete model (simple_models.h, panda_dynamics.h) is a struct with
+// templated static functions, evaluated on `double` for values and on
+// `ceres::Jet` for derivatives with respect to q, qd, qdd or p:
+//
+//   template <typename T> static VectorX<T> InverseDynamics(q, qd, qdd, p);
+//   template <typename T> static VectorX<T> TipLoad(q, qd, qdd, p);
+//
+// TipLoad is the joint torque needed to carry a unit point mass at the end of
+// the last link (the `payload` effect scales it by the mass: ID is linear in a
+// point mass). AnalyticModel is the runtime interface over these structs
+// (chosen by `--model`), offering `double` and `DiagJet` evaluations so the
+// diagnosis pipeline and Ceres fits work for any of them:
+//
+//   auto model = MakeAnalyticModel("pendulum");          // model_registry.h
+//   Eigen::VectorXd p = ParseParams(*model, {"m=2"});    // named, validated
+//   Eigen::VectorXd tau = model->InverseDynamics(q, qd, qdd, p);
+//   Eigen::VectorXd qdd2 = model->ForwardDynamics(q, qd, tau, p);   // == qdd
+#pragma once
+
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/LU>
+#include <ceres/jet.h>
+
+#include "diffdyn/autodiff_ode/check.h"
+
+namespace diffdyn {
+
+/// Dynamic-size column vector of scalar T.
+template <typename T>
+using VectorX = Eigen::Matrix<T, Eigen::Dynamic, 1>;
+/// Dynamic-size matrix of scalar T.
+template <typename T>
+using MatrixX = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>;
+
+/// Number of derivative directions of the Jets used by diagnosis fits (at most
+/// this many parameters are differentiated at once).
+inline constexpr int kDiagJetSize = 8;
+/// The Jet type of the runtime model interface: value + kDiagJetSize derivatives.
+using DiagJet = ceres::Jet<double, kDiagJetSize>;
+
+/// One named model parameter, as written in `--param name=value`.
+struct ParamSpec {
+  std::string name;       ///< e.g. "m", "l", "m_pole"
+  double default_value;   ///< the model_conventions.md default
+  std::string unit;       ///< SI unit, e.g. "kg"
+  std::string meaning;    ///< one-line description for reports
+};
+
+/// Runtime interface of an analytic model: tau = ID(q, qd, qdd; p) on double or
+/// DiagJet, plus the tip load of a unit point mass. Sizes: q, qd, qdd, tau: n =
+/// dof(); p: param_specs().size().
+class AnalyticModel {
+ public:
+  virtual ~AnalyticModel() = default;
+
+  /// The `--model` name ("pendulum", "cartpole", "double-pendulum", "arm2", "panda").
+  virtual std::string name() const = 0;
+  /// n, the number of joints.
+  virtual int dof() const = 0;
+  /// The named parameters p with defaults and units.
+  virtual const std::vector<ParamSpec>& param_specs() const = 0;
+  /// True when joint j (0-based) is prismatic (units N, m instead of N m, rad).
+  virtual bool prismatic(int joint) const = 0;
+
+  /// tau = M(q) qdd + c(q, qd) + g(q) (n), double.
+  virtual Eigen::VectorXd InverseDynamics(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                          const Eigen::VectorXd& qdd,
+                                          const Eigen::VectorXd& p) const = 0;
+  /// The same on Jets (derivatives w.r.t. whatever the caller seeded).
+  virtual VectorX<DiagJet> InverseDynamics(const VectorX<DiagJet>& q, const VectorX<DiagJet>& qd,
+                                           const VectorX<DiagJet>& qdd,
+                                           const VectorX<DiagJet>& p) const = 0;
+  /// Joint torque (n) that a unit point mass (1 kg) at the end of the last link needs.
+  virtual Eigen::VectorXd TipLoad(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                  const Eigen::VectorXd& qdd, const Eigen::VectorXd& p) const = 0;
+  /// The same on Jets.
+  virtual VectorX<DiagJet> TipLoad(const VectorX<DiagJet>& q, const VectorX<DiagJet>& qd,
+                                   const VectorX<DiagJet>& qdd,
+                                   const VectorX<DiagJet>& p) const = 0;
+
+  /// The default parameter vector p (size param_specs().size()).
+  Eigen::VectorXd DefaultParams() const {
+    const auto& specs = param_specs();
+    Eigen::VectorXd p(static_cast<int>(specs.size()));
+    for (int i = 0; i < p.size(); ++i) p[i] = specs[i].default_value;
+    return p;
+  }
+
+  /// Index of parameter `name` in p, or -1.
+  int ParamIndex(const std::string& name) const {
+    const auto& specs = param_specs();
+    for (int i = 0; i < static_cast<int>(specs.size()); ++i) {
+      if (specs[i].name == name) return i;
+    }
+    return -1;
+  }
+
+  /// M(q) (n x n) from n + 1 inverse-dynamics calls: M e_i = ID(q,0,e_i) - ID(q,0,0).
+  Eigen::MatrixXd MassMatrix(const Eigen::VectorXd& q, const Eigen::VectorXd& p) const {
+    const int n = dof();
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+    const Eigen::VectorXd bias = InverseDynamics(q, zero, zero, p);
+    Eigen::MatrixXd m(n, n);
+    for (int i = 0; i < n; ++i) {
+      m.col(i) = InverseDynamics(q, zero, Eigen::VectorXd::Unit(n, i), p) - bias;
+    }
+    return 0.5 * (m + m.transpose());
+  }
+
+  /// qdd = M(q)^{-1} (tau - ID(q, qd, 0)) (n). Throws NumericalError if M is singular.
+  Eigen::VectorXd ForwardDynamics(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                  const Eigen::VectorXd& tau, const Eigen::VectorXd& p) const {
+    const Eigen::VectorXd bias = InverseDynamics(q, qd, Eigen::VectorXd::Zero(dof()), p);
+    const Eigen::LLT<Eigen::MatrixXd> llt(MassMatrix(q, p));
+    if (llt.info() != Eigen::Success) {
+      throw NumericalError(StrCat(name(), ": mass matrix is not positive definite"));
+    }
+    return llt.solve(tau - bias);
+  }
+
+  /// Checks that q, qd, qdd (n each) and p have the right sizes; names `what` on failure.
+  void CheckSizes(const Eigen::VectorXd& q, const Eigen::VectorXd& p, const std::string& what) const {
+    DIFFDYN_CHECK(q.size() == dof(), what, ": model ", name(), " has ", dof(), " joints, got ",
+                  q.size());
+    DIFFDYN_CHECK(p.size() == static_cast<int>(param_specs().size()), what, ": model ", name(),
+                  " has ", param_specs().size(), " parameters, got ", p.size());
+  }
+};
+
+/// AnalyticModel over a struct `Model` with static members kName, kDof, Specs(),
+/// Prismatic(j), InverseDynamics<T>(q, qd, qdd, p) and TipLoad<T>(q, qd, qdd, p).
+template <typename Model>
+class AnalyticModelAdapter final : public AnalyticModel {
+ public:
+  AnalyticModelAdapter() : specs_(Model::Specs()) {}
+  std::string name() const override { return Model::kName; }
+  int dof() const override { return Model::kDof; }
+  const std::vector<ParamSpec>& param_specs() const override { return specs_; }
+  bool prismatic(int joint) const override { return Model::Prismatic(joint); }
+  Eigen::VectorXd InverseDynamics(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                  const Eigen::VectorXd& qdd,
+                                  const Eigen::VectorXd& p) const override {
+    return Model::template InverseDynamics<double>(q, qd, qdd, p);
+  }
+  VectorX<DiagJet> InverseDynamics(const VectorX<DiagJet>& q, const VectorX<DiagJet>& qd,
+                                   const VectorX<DiagJet>& qdd,
+                                   const VectorX<DiagJet>& p) const override {
+    return Model::template InverseDynamics<DiagJet>(q, qd, qdd, p);
+  }
+  Eigen::VectorXd TipLoad(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                          const Eigen::VectorXd& qdd, const Eigen::VectorXd& p) const override {
+    return Model::template TipLoad<double>(q, qd, qdd, p);
+  }
+  VectorX<DiagJet> TipLoad(const VectorX<DiagJet>& q, const VectorX<DiagJet>& qd,
+                           const VectorX<DiagJet>& qdd,
+                           const VectorX<DiagJet>& p) const override {
+    return Model::template TipLoad<DiagJet>(q, qd, qdd, p);
+  }
+
+ private:
+  std::vector<ParamSpec> specs_;
+};
+
+/// p from the defaults overridden by `assignments` ("name=value", as given to
+/// --param; a 3-vector parameter `v` with entries v_x, v_y, v_z also accepts
+/// "v=a,b,c"). Throws diffdyn::Error naming the option for an unknown name or a
+/// value that is not a finite number.
+inline Eigen::VectorXd ParseParams(const AnalyticModel& model,
+                                   const std::vector<std::string>& assignments,
+                                   Eigen::VectorXd p = Eigen::VectorXd()) {
+  if (p.size() == 0) p = model.DefaultParams();
+  auto parse_number = [&](const std::string& text, const std::string& option) {
+    std::size_t used = 0;
+    double value = 0;
+    try {
+      value = std::stod(text, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    DIFFDYN_CHECK(used == text.size() && !text.empty() && std::isfinite(value), "--param ",
+                  option, ": '", text, "' is not a finite number");
+    return value;
+  };
+  for (const std::string& assignment : assignments) {
+    const auto eq = assignment.find('=');
+    DIFFDYN_CHECK(eq != std::string::npos && eq > 0, "--param ", assignment,
+                  ": expected name=value");
+    const std::string name = assignment.substr(0, eq);
+    const std::string value = assignment.substr(eq + 1);
+    const int index = model.ParamIndex(name);
+    if (index >= 0) {
+      p[index] = parse_number(value, assignment);
+      continue;
+    }
+    // A 3-vector parameter given as name=a,b,c.
+    const int ix = model.ParamIndex(name + "_x");
+    std::string known;
+    for (const auto& spec : model.param_specs()) known += (known.empty() ? "" : ", ") + spec.name;
+    DIFFDYN_CHECK(ix >= 0, "--param ", assignment, ": model ", model.name(),
+                  " has no parameter '", name, "' (it has: ", known, ")");
+    std::vector<std::string> parts;
+    std::size_t start = 0;
+    for (std::size_t comma; (comma = value.find(',', start)) != std::string::npos;
+         start = comma + 1) {
+      parts.push_back(value.substr(start, comma - start));
+    }
+    parts.push_back(value.substr(start));
+    DIFFDYN_CHECK(parts.size() == 3, "--param ", assignment, ": expected three values x,y,z");
+    const char* axes[3] = {"_x", "_y", "_z"};
+    for (int k = 0; k < 3; ++k) {
+      const int i = model.ParamIndex(name + axes[k]);
+      DIFFDYN_CHECK(i >= 0, "--param ", assignment, ": no parameter ", name, axes[k]);
+      p[i] = parse_number(parts[k], assignment);
+    }
+  }
+  return p;
+}
+
+}  // namespace diffdyn

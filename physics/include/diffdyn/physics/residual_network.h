@@ -1,0 +1,107 @@
+// A learned residual torque: a one-hidden-layer tanh network for what no named
+// effect explains.
+//
+// Inputs x = (q, qd, qdd) (3n) are standardised, s = (x - mean) / scale, and
+//
+//   r(x) = W2 tanh(W1 s + b1) + b2          (W1: H x 3n, W2: n x H),
+//
+// gives n joint torques. The hidden layer is drawn once from a seed (random
+// features, W1 ~ N(0, 1/3n)) and only the output layer is learned, by ridge
+// regression on the residual torques:
+//
+//   [W2 b2] = argmin sum_k |y_k - W2 h_k - b2|^2 + lambda |W2|^2,
+//
+// a linear least-squares problem with a closed-form solution, so fitting is
+// deterministic and takes milliseconds. Evaluation is templated (Jets pass
+// through tanh) so it can sit inside an extended model's torque.
+#pragma once
+
+#include <cmath>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+
+#include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/physics/analytic_model.h"
+
+namespace diffdyn {
+
+/// r(q, qd, qdd) = W2 tanh(W1 s + b1) + b2; see the header comment for sizes.
+struct ResidualNetwork {
+  Eigen::VectorXd in_mean;   ///< 3n
+  Eigen::VectorXd in_scale;  ///< 3n, positive
+  Eigen::MatrixXd w1;        ///< H x 3n
+  Eigen::VectorXd b1;        ///< H
+  Eigen::MatrixXd w2;        ///< n x H
+  Eigen::VectorXd b2;        ///< n
+
+  /// Number of joints n (0 for an empty network).
+  int dof() const { return static_cast<int>(w2.rows()); }
+
+  /// r(x) (n) for x = (q, qd, qdd), each of size n.
+  template <typename T>
+  VectorX<T> operator()(const VectorX<T>& q, const VectorX<T>& qd, const VectorX<T>& qdd) const {
+    using std::tanh;
+    const int n = dof();
+    VectorX<T> s(3 * n);
+    for (int j = 0; j < n; ++j) {
+      s[j] = (q[j] - in_mean[j]) / in_scale[j];
+      s[n + j] = (qd[j] - in_mean[n + j]) / in_scale[n + j];
+      s[2 * n + j] = (qdd[j] - in_mean[2 * n + j]) / in_scale[2 * n + j];
+    }
+    VectorX<T> h(w1.rows());
+    for (int k = 0; k < w1.rows(); ++k) {
+      T acc = T(b1[k]);
+      for (int i = 0; i < 3 * n; ++i) acc += w1(k, i) * s[i];
+      h[k] = tanh(acc);
+    }
+    VectorX<T> out(n);
+    for (int j = 0; j < n; ++j) {
+      T acc = T(b2[j]);
+      for (int k = 0; k < h.size(); ++k) acc += w2(j, k) * h[k];
+      out[j] = acc;
+    }
+    return out;
+  }
+
+  /// Fits the output layer. inputs: 3n x N (q; qd; qdd per column), targets:
+  /// n x N residual torques, `hidden` random features, ridge weight `lambda`
+  /// (relative to the mean feature energy). Throws diffdyn::Error on bad sizes.
+  static ResidualNetwork Fit(const Eigen::MatrixXd& inputs, const Eigen::MatrixXd& targets,
+                             int hidden, double lambda, Rng& rng) {
+    const int d = static_cast<int>(inputs.rows());
+    const int n = static_cast<int>(targets.rows());
+    const int count = static_cast<int>(inputs.cols());
+    DIFFDYN_CHECK(d == 3 * n && targets.cols() == count && count > 0 && hidden > 0,
+                  "ResidualNetwork::Fit: inputs ", d, "x", count, ", targets ", n, "x",
+                  targets.cols(), ", hidden ", hidden);
+    ResidualNetwork net;
+    net.in_mean = inputs.rowwise().mean();
+    net.in_scale = ((inputs.colwise() - net.in_mean).array().square().rowwise().mean().sqrt() +
+                    1e-9)
+                       .matrix();
+    net.w1.resize(hidden, d);
+    net.b1.resize(hidden);
+    const double w_scale = 1.0 / std::sqrt(static_cast<double>(d));
+    for (int k = 0; k < hidden; ++k) {
+      for (int i = 0; i < d; ++i) net.w1(k, i) = w_scale * StandardNormal(rng);
+      net.b1[k] = StandardNormal(rng);
+    }
+    // Hidden features of every sample, with a constant row for b2.
+    const Eigen::MatrixXd s =
+        (inputs.colwise() - net.in_mean).array().colwise() / net.in_scale.array();
+    Eigen::MatrixXd h(hidden + 1, count);
+    h.topRows(hidden) = ((net.w1 * s).colwise() + net.b1).array().tanh().matrix();
+    h.row(hidden).setOnes();
+    Eigen::MatrixXd gram = h * h.transpose();
+    const double energy = gram.diagonal().head(hidden).mean();
+    gram.diagonal().head(hidden).array() += lambda * energy;
+    const Eigen::MatrixXd solution = gram.ldlt().solve(h * targets.transpose());  // (H+1) x n
+    net.w2 = solution.topRows(hidden).transpose();
+    net.b2 = solution.row(hidden).transpose();
+    return net;
+  }
+};
+
+}  // namespace diffdyn
