@@ -5,6 +5,8 @@
 #include <iostream>
 #include <string>
 
+#include <glog/logging.h>
+
 #include "command.h"
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/solvers/version.h"
@@ -75,4 +77,10 @@ int Run(int argc, char** argv) {
 
 }  // namespace diffdyn::cli
 
-int main(int argc, char** argv) { return diffdyn::cli::Run(argc, argv); }
+int main(int argc, char** argv) {
+  // Ceres logs through glog; diffdyn reports failures itself, as one line.
+  FLAGS_minloglevel = google::GLOG_FATAL;
+  FLAGS_logtostderr = true;
+  google::InitGoogleLogging(argv[0]);
+  return diffdyn::cli::Run(argc, argv);
+}

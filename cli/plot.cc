@@ -20,7 +20,7 @@ std::filesystem::path PlotsDir() {
 
 bool RunPlotScript(const std::string& script, const std::vector<std::string>& args) {
   const std::string path = (PlotsDir() / script).string();
-  std::vector<std::string> argv_storage = {"python3", path};
+  std::vector<std::string> argv_storage = {DIFFDYN_PYTHON, path};
   argv_storage.insert(argv_storage.end(), args.begin(), args.end());
   std::vector<char*> argv;
   for (auto& a : argv_storage) argv.push_back(a.data());
@@ -31,7 +31,7 @@ bool RunPlotScript(const std::string& script, const std::vector<std::string>& ar
   const pid_t pid = fork();
   if (pid == 0) {
     setenv("MPLBACKEND", "Agg", 1);
-    execvp("python3", argv.data());
+    execv(DIFFDYN_PYTHON, argv.data());
     _exit(127);
   }
   int status = 0;

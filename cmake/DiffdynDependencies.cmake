@@ -16,4 +16,11 @@ endif()
 if(DIFFDYN_BUILD_BENCH)
   find_package(benchmark REQUIRED)
 endif()
-find_package(Python3 COMPONENTS Interpreter)
+# Plots and PyTorch references use Debian's python3 (python3-matplotlib, python3-torch),
+# not whatever python3 comes first on PATH.
+if(EXISTS /usr/bin/python3)
+  set(DIFFDYN_PYTHON_DEFAULT /usr/bin/python3)
+else()
+  find_program(DIFFDYN_PYTHON_DEFAULT python3 REQUIRED)
+endif()
+set(DIFFDYN_PYTHON ${DIFFDYN_PYTHON_DEFAULT} CACHE FILEPATH "Python with matplotlib for plots")

@@ -2,7 +2,10 @@
 #include <sys/wait.h>
 
 #include <array>
+#include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <sstream>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -36,6 +39,13 @@ Result RunDiffdyn(const std::string& args) {
     fclose(err);
   }
   return result;
+}
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
 }
 
 int CountLines(const std::string& s) {
@@ -103,6 +113,48 @@ TEST(Cli, JsonSummaryIsOneLineObject) {
   ASSERT_TRUE(summary.is_object());
   EXPECT_TRUE(summary.at("ode_double_precision").get<bool>());
   EXPECT_EQ(summary.at("version").get<std::string>(), diffdyn::Version());
+}
+
+}  // namespace
+
+namespace {
+
+TEST(Demo, QuickRunIdentifiesThePendulumAndWritesItsReport) {
+  const std::string out = testing::TempDir() + "/demo_quick";
+  const Result r = RunDiffdyn("demo --quick --json --seed 4 --out " + out);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto summary = nlohmann::json::parse(r.out);
+  const auto& fit = summary.at("pendulum_fit");
+  EXPECT_TRUE(fit.at("converged").get<bool>());
+  EXPECT_LT(fit.at("final_rms").get<double>(), fit.at("initial_rms").get<double>());
+  for (const auto& p : fit.at("params")) {
+    EXPECT_LT(p.at("z").get<double>(), 4.0) << p.dump();
+    EXPECT_LT(std::abs(p.at("fitted").get<double>() - p.at("truth").get<double>()),
+              0.05 * p.at("truth").get<double>())
+        << p.dump();
+  }
+  for (const char* file : {"report.md", "pendulum_fit.csv"}) {
+    FILE* f = fopen((out + "/" + file).c_str(), "r");
+    EXPECT_NE(f, nullptr) << file;
+    if (f != nullptr) fclose(f);
+  }
+}
+
+TEST(Demo, SameSeedSameBytes) {
+  const std::string a = testing::TempDir() + "/demo_a", b = testing::TempDir() + "/demo_b";
+  ASSERT_EQ(RunDiffdyn("demo --quick --quiet --seed 11 --out " + a).exit_code, 0);
+  ASSERT_EQ(RunDiffdyn("demo --quick --quiet --seed 11 --out " + b).exit_code, 0);
+  const std::string first = ReadFile(a + "/pendulum_fit.csv");
+  EXPECT_FALSE(first.empty());
+  EXPECT_EQ(first, ReadFile(b + "/pendulum_fit.csv"));
+  EXPECT_EQ(ReadFile(a + "/report.md"), ReadFile(b + "/report.md"));
+}
+
+TEST(Demo, UnwritableOutputIsExitCode2) {
+  const Result r = RunDiffdyn("demo --quick --out /proc/no_such_dir");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_EQ(CountLines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("--out"), std::string::npos) << r.err;
 }
 
 }  // namespace
