@@ -249,7 +249,7 @@ IntegrationStats IntegrateTimesFixed(const System& sys, State& x, const std::vec
   DIFFDYN_CHECK(options.dt > 0, "fixed-step dt must be positive, got ", options.dt);
   auto stepper = MakeFixedStepper<M, State>();
   IntegrationStats stats;
-  observer(0, times[0], static_cast<const State&>(x));
+  observer(0, times[0], x);
   for (std::size_t i = 1; i < times.size(); ++i) {
     const double span = times[i] - times[i - 1];
     const long n = std::max(1L, static_cast<long>(std::ceil(std::abs(span) / options.dt - 1e-9)));
@@ -259,7 +259,7 @@ IntegrationStats IntegrateTimesFixed(const System& sys, State& x, const std::vec
       CheckFiniteState(x, times[i - 1] + static_cast<double>(k + 1) * h);
     }
     stats.accepted_steps += n;
-    observer(static_cast<int>(i), times[i], static_cast<const State&>(x));
+    observer(static_cast<int>(i), times[i], x);
   }
   return stats;
 }
@@ -299,7 +299,7 @@ IntegrationStats IntegrateTimesAdaptive(const System& sys, State& x,
   auto stepper = MakeControlledStepper<M, State, Algebra>(options.abs_tol, options.rel_tol);
   const double sign = times.back() > times.front() ? 1.0 : -1.0;
   IntegrationStats stats;
-  observer(0, times[0], static_cast<const State&>(x));
+  observer(0, times[0], x);
   double t = times[0];
   double dt = sign * options.dt;
   for (std::size_t i = 1; i < times.size(); ++i) {
@@ -325,7 +325,7 @@ IntegrationStats IntegrateTimesAdaptive(const System& sys, State& x,
         }
       }
     }
-    observer(static_cast<int>(i), times[i], static_cast<const State&>(x));
+    observer(static_cast<int>(i), times[i], x);
   }
   return stats;
 }
@@ -349,7 +349,9 @@ IntegrationStats IntegrateTimesWith(const System& sys, State& x, const std::vect
 
 /// Integrates sys from times[0] through times[1], ... (strictly monotone, increasing
 /// or decreasing), updating x (n, double or Jet entries) in place and calling
-/// observer(i, times[i], x) at every time point including times[0]. Throws
+/// observer(i, times[i], x) at every time point including times[0]. The observer may
+/// take x by non-const reference and change it (a jump at times[i], as an adjoint
+/// does when it adds dL/dx(t_i)): every stepper here re-evaluates f after it. Throws
 /// diffdyn::Error for bad times or options, diffdyn::NumericalError for step-size
 /// underflow, a non-finite state, or more than options.max_steps steps.
 template <typename State, typename System, typename Observer>
