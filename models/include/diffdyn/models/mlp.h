@@ -271,7 +271,13 @@ class Mlp {
     CheckInput(x.size());
     Eigen::Matrix<R, Eigen::Dynamic, 1> h = x.template cast<R>();
     for (int l = 0; l < arch_.num_layers(); ++l) {
-      Eigen::Matrix<R, Eigen::Dynamic, 1> a = W(l).template cast<R>() * h + b(l).template cast<R>();
+      Eigen::Matrix<R, Eigen::Dynamic, 1> a;
+      if constexpr (std::is_same_v<T, double>) {
+        a = W(l) * h;  // double weights times R inputs: no cast of W
+        a += b(l).template cast<R>();
+      } else {
+        a = W(l).template cast<R>() * h + b(l).template cast<R>();
+      }
       if (l + 1 < arch_.num_layers()) {
         for (Eigen::Index i = 0; i < a.size(); ++i) a[i] = ActivationValue(arch_.activations[l], a[i]);
       }
