@@ -28,7 +28,11 @@ void WriteFileAtomically(const std::filesystem::path& path, WriteFn&& write) {
   const fs::path parent = path.has_parent_path() ? path.parent_path() : fs::path(".");
   DIFFDYN_CHECK(fs::is_directory(parent), path.string(), ": directory ", parent.string(),
                 " does not exist");
-  const fs::path tmp = parent / ("." + path.filename().string() + ".tmp");
+  // Appended piecewise: g++ 12 reports a false -Wrestrict on "." + std::string&&.
+  std::string tmp_name = ".";
+  tmp_name += path.filename().string();
+  tmp_name += ".tmp";
+  const fs::path tmp = parent / tmp_name;
   try {
     {
       std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
