@@ -1,5 +1,6 @@
 // The command line's conventions: exit codes, one-line errors, --help, --json.
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <array>
 #include <cmath>
@@ -23,7 +24,11 @@ struct Result {
 
 // Runs the diffdyn executable with `args` (a shell-quoted string).
 Result RunDiffdyn(const std::string& args) {
-  const std::string err_file = testing::TempDir() + "/diffdyn_stderr.txt";
+  // A file of its own per call: ctest runs tests in parallel.
+  std::string err_file = testing::TempDir() + "/diffdyn_stderr_XXXXXX";
+  const int fd = mkstemp(err_file.data());
+  EXPECT_GE(fd, 0);
+  close(fd);
   const std::string command = std::string(DIFFDYN_EXE) + " " + args + " 2>" + err_file;
   Result result{};
   FILE* pipe = popen(command.c_str(), "r");
@@ -38,6 +43,7 @@ Result RunDiffdyn(const std::string& args) {
     while ((n = fread(buffer.data(), 1, buffer.size(), err)) > 0) result.err.append(buffer.data(), n);
     fclose(err);
   }
+  std::remove(err_file.c_str());
   return result;
 }
 
