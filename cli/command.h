@@ -43,5 +43,6 @@ int Run(int argc, char** argv);
 // One registration function per command file.
 void RegisterInfoCommand(CLI::App& app);
 void RegisterDemoCommand(CLI::App& app);
+void RegisterCollectCommand(CLI::App& app);
 
 }  // namespace diffdyn::cli

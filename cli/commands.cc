@@ -4,6 +4,7 @@
 namespace diffdyn::cli {
 
 void RegisterCommands(CLI::App& app) {
+  RegisterCollectCommand(app);
   RegisterDemoCommand(app);
   RegisterInfoCommand(app);
 }

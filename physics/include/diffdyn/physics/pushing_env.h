@@ -55,7 +55,7 @@ struct PushingConfig {
   Eigen::Vector3d goal{0.8, -0.1, 0.0};  ///< drawn only
   // Pusher tip and tool.
   double tool_length = 0.1034;           ///< flange to tool point along the flange z axis (m)
-  double tip_radius = 0.01;              ///< radius of the tip capsule (m)
+  double tip_radius = 0.016;             ///< radius of the tip capsule (m), see the README
   double tip_length = 0.04;              ///< length of the capsule's axis segment (m)
   double push_height = 0.02;             ///< z of the tool point while pushing (m)
   // Motion and integration.
