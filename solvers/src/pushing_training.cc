@@ -1,0 +1,282 @@
+#include "diffdyn/solvers/pushing_training.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/parallel.h"
+#include "diffdyn/autodiff_ode/progress.h"
+#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/adam.h"
+#include "diffdyn/models/losses.h"
+#include "diffdyn/models/pose_loss.h"
+
+namespace diffdyn {
+
+std::vector<PushingTrajectory> ReadPushingData(const std::filesystem::path& path) {
+  std::vector<PushingTrajectory> trajectories = ReadPushingCsv(path);
+  static constexpr const char* kState[] = {"x", "y", "theta"};
+  static constexpr const char* kAction[] = {"push_location", "push_angle", "push_length"};
+  long line = 1;
+  for (const PushingTrajectory& t : trajectories) {
+    for (size_t s = 0; s < t.states.size(); ++s) {
+      ++line;
+      for (int i = 0; i < 3; ++i) {
+        DIFFDYN_CHECK(std::isfinite(t.states[s][i]), path.string(), ":", line, ": column ",
+                      kState[i], " is not finite (", t.states[s][i], ")");
+        DIFFDYN_CHECK(s >= t.actions.size() || std::isfinite(t.actions[s][i]), path.string(), ":",
+                      line, ": column ", kAction[i], " is not finite (", t.actions[s][i], ")");
+      }
+    }
+  }
+  return trajectories;
+}
+
+PushingWindows MakePushingWindows(const std::vector<PushingTrajectory>& trajectories, int horizon) {
+  DIFFDYN_CHECK(horizon >= 1, "MakePushingWindows: horizon must be >= 1, got ", horizon);
+  int count = 0;
+  for (const PushingTrajectory& t : trajectories) {
+    count += std::max(0, static_cast<int>(t.actions.size()) - horizon + 1);
+  }
+  DIFFDYN_CHECK(count > 0, "no ", horizon, "-step windows in ", trajectories.size(),
+                " trajectories (too short or empty data)");
+  PushingWindows w;
+  w.horizon = horizon;
+  w.start.resize(3, count);
+  w.actions.assign(horizon, Eigen::MatrixXd(3, count));
+  w.targets.assign(horizon, Eigen::MatrixXd(3, count));
+  int i = 0;
+  for (const PushingTrajectory& t : trajectories) {
+    const int windows = static_cast<int>(t.actions.size()) - horizon + 1;
+    for (int s = 0; s < windows; ++s, ++i) {
+      w.start.col(i) = t.states[s];
+      for (int k = 0; k < horizon; ++k) {
+        w.actions[k].col(i) = t.actions[s + k];
+        w.targets[k].col(i) = t.states[s + k + 1];
+      }
+    }
+  }
+  return w;
+}
+
+PushingWindows SelectWindows(const PushingWindows& data, std::span<const int> index) {
+  PushingWindows w;
+  w.horizon = data.horizon;
+  GatherColumnBlocks(data.start, index, 1, &w.start);
+  w.actions.resize(data.horizon);
+  w.targets.resize(data.horizon);
+  for (int k = 0; k < data.horizon; ++k) {
+    GatherColumnBlocks(data.actions[k], index, 1, &w.actions[k]);
+    GatherColumnBlocks(data.targets[k], index, 1, &w.targets[k]);
+  }
+  return w;
+}
+
+double RolloutLoss(const TransitionModel& model, const PushingWindows& data, double gamma,
+                   int threads, int chunk_size, std::vector<double>* per_step) {
+  const int n = data.size();
+  const int k_max = data.horizon;
+  const int chunks = NumChunks(n, chunk_size);
+  // Per chunk: K partial sums of SE2 (scaled by 1 / N).
+  std::vector<std::vector<double>> partial(chunks, std::vector<double>(k_max, 0.0));
+  ParallelForChunks(n, chunk_size, threads, [&](int c, int begin, int end) {
+    const int nb = end - begin;
+    auto ws = model.MakeWorkspace(nb);
+    Eigen::MatrixXd x = data.start.middleCols(begin, nb);
+    Eigen::MatrixXd next(3, nb);
+    for (int k = 0; k < k_max; ++k) {
+      model.PredictBatch(x, data.actions[k].middleCols(begin, nb), next, *ws);
+      partial[c][k] = Se2PoseLoss(next, data.targets[k].middleCols(begin, nb), 1.0 / n, nullptr);
+      x.swap(next);
+    }
+  });
+  std::vector<double> steps(k_max, 0.0);
+  for (int c = 0; c < chunks; ++c) {
+    for (int k = 0; k < k_max; ++k) steps[k] += partial[c][k];
+  }
+  double loss = 0.0;
+  for (int k = 0; k < k_max; ++k) loss += std::pow(gamma, k) * steps[k];
+  if (per_step) *per_step = steps;
+  return loss;
+}
+
+PushingEvaluation EvaluatePushingModel(const TransitionModel& model,
+                                       const std::vector<PushingTrajectory>& trajectories,
+                                       int threads) {
+  constexpr int kHorizon = 4;
+  PushingEvaluation e;
+  const PushingWindows single = MakePushingWindows(trajectories, 1);
+  e.n_samples = single.size();
+  e.single_step_loss = RolloutLoss(model, single, 1.0, threads);
+  const PushingWindows multi = MakePushingWindows(trajectories, kHorizon);
+  e.n_windows = multi.size();
+  e.avg_multi_step_loss = RolloutLoss(model, multi, 1.0, threads) / kHorizon;
+  return e;
+}
+
+// Buffers of one chunk of a batch: gathered data, the rollout states, one tape per
+// rollout step, cotangents and the chunk's gradient.
+struct Trainer::Chunk {
+  int size = -1;
+  std::vector<std::unique_ptr<TransitionWorkspace>> tapes;
+  std::vector<Eigen::MatrixXd> x, u, target;
+  Eigen::MatrixXd g_loss, g_state, carry;
+  Eigen::VectorXd grad;
+  double loss = 0.0;
+
+  void Resize(const PushingModel& model, int horizon, int nb) {
+    if (static_cast<int>(tapes.size()) != horizon) {
+      tapes.clear();
+      for (int k = 0; k < horizon; ++k) tapes.push_back(model.MakeWorkspace(nb));
+      size = -1;
+    }
+    grad.resize(model.num_parameters());
+    if (size == nb) return;
+    size = nb;
+    x.assign(horizon + 1, Eigen::MatrixXd(3, nb));
+    u.assign(horizon, Eigen::MatrixXd(3, nb));
+    target.assign(horizon, Eigen::MatrixXd(3, nb));
+    g_loss.resize(3, nb);
+    g_state.resize(3, nb);
+    carry.resize(3, nb);
+  }
+};
+
+Trainer::Trainer(PushingModel* model, const TrainOptions& options)
+    : model_(model), options_(options) {
+  DIFFDYN_CHECK(model != nullptr, "Trainer needs a model");
+  DIFFDYN_CHECK(options.epochs >= 1, "--epochs must be >= 1, got ", options.epochs);
+  DIFFDYN_CHECK(options.learning_rate > 0 && std::isfinite(options.learning_rate),
+                "--lr must be positive, got ", options.learning_rate);
+  DIFFDYN_CHECK(options.batch_size >= 1, "--batch must be >= 1, got ", options.batch_size);
+  DIFFDYN_CHECK(options.val_fraction >= 0 && options.val_fraction < 1,
+                "--val-fraction must be in [0, 1), got ", options.val_fraction);
+  DIFFDYN_CHECK(options.gamma > 0 && std::isfinite(options.gamma), "--gamma must be positive, got ",
+                options.gamma);
+  DIFFDYN_CHECK(options.chunk_size >= 1, "chunk size must be >= 1, got ", options.chunk_size);
+}
+
+Trainer::~Trainer() = default;
+
+double Trainer::BatchLossAndGradient(const PushingWindows& data, std::span<const int> index,
+                                     Eigen::VectorXd* grad) {
+  const int n = static_cast<int>(index.size());
+  DIFFDYN_CHECK(n > 0, "Trainer: empty batch");
+  const int horizon = data.horizon;
+  const int chunks = NumChunks(n, options_.chunk_size);
+  while (static_cast<int>(chunks_.size()) < chunks) chunks_.push_back(std::make_unique<Chunk>());
+  const double scale = 1.0 / n;
+  const PushingModel& model = *model_;
+  ParallelForChunks(n, options_.chunk_size, options_.threads, [&](int c, int begin, int end) {
+    Chunk& ch = *chunks_[c];
+    const int nb = end - begin;
+    ch.Resize(model, horizon, nb);
+    const std::span<const int> idx = index.subspan(begin, nb);
+    // Gather the chunk's windows.
+    for (int j = 0; j < nb; ++j) {
+      ch.x[0].col(j) = data.start.col(idx[j]);
+      for (int k = 0; k < horizon; ++k) {
+        ch.u[k].col(j) = data.actions[k].col(idx[j]);
+        ch.target[k].col(j) = data.targets[k].col(idx[j]);
+      }
+    }
+    // Forward rollout with one tape per step.
+    for (int k = 0; k < horizon; ++k) model.Forward(ch.x[k], ch.u[k], ch.x[k + 1], *ch.tapes[k]);
+    // Backward: step k's cotangent is its discounted loss gradient plus what flows
+    // back from step k + 1.
+    ch.loss = 0.0;
+    ch.grad.setZero();
+    ch.carry.setZero();
+    for (int k = horizon - 1; k >= 0; --k) {
+      const double w = std::pow(options_.gamma, k);
+      ch.loss += w * Se2PoseLoss(ch.x[k + 1], ch.target[k], scale, &ch.g_loss);
+      if (grad == nullptr) continue;
+      ch.carry += w * ch.g_loss;
+      model.Backward(ch.carry, *ch.tapes[k], &ch.grad, k > 0 ? &ch.g_state : nullptr);
+      if (k > 0) ch.carry.swap(ch.g_state);
+    }
+  });
+  // Chunk order: the same sums at any thread count.
+  double loss = 0.0;
+  if (grad) grad->setZero(model.num_parameters());
+  for (int c = 0; c < chunks; ++c) {
+    loss += chunks_[c]->loss;
+    if (grad) *grad += chunks_[c]->grad;
+  }
+  return loss;
+}
+
+TrainResult Trainer::Train(const PushingWindows& data,
+                           const std::function<void(const EpochReport&)>& on_epoch) {
+  const int n = data.size();
+  TrainResult result;
+  result.n_val = static_cast<int>(std::lround(options_.val_fraction * n));
+  result.n_train = n - result.n_val;
+  DIFFDYN_CHECK(result.n_train >= 1, "Trainer: no training samples left after the split (", n,
+                " windows, --val-fraction ", options_.val_fraction, ")");
+  // Seeded split: a shuffled permutation, validation first.
+  std::vector<int> order(n);
+  std::iota(order.begin(), order.end(), 0);
+  Rng split_rng(options_.seed);
+  Shuffle(order.begin(), order.end(), split_rng);
+  const std::span<const int> val_index(order.data(), result.n_val);
+  std::vector<int> train_index(order.begin() + result.n_val, order.end());
+  const PushingWindows val = SelectWindows(data, val_index);
+
+  Adam adam(model_->num_parameters(), {.learning_rate = options_.learning_rate});
+  MiniBatcher batcher(result.n_train, options_.batch_size, /*drop_last=*/false, options_.seed + 1);
+  std::vector<int> batch_index(std::min(options_.batch_size, result.n_train));
+  Eigen::VectorXd grad(model_->num_parameters());
+  ProgressBar bar("train", options_.epochs, options_.progress);
+  std::vector<double> times;
+  for (int epoch = 1; epoch <= options_.epochs; ++epoch) {
+    batcher.Shuffle();
+    const auto start = std::chrono::steady_clock::now();
+    double sum = 0.0;
+    for (int b = 0; b < batcher.num_batches(); ++b) {
+      const std::span<const int> positions = batcher.Batch(b);
+      for (size_t i = 0; i < positions.size(); ++i) batch_index[i] = train_index[positions[i]];
+      const std::span<const int> index(batch_index.data(), positions.size());
+      double loss = 0.0;
+      try {
+        loss = BatchLossAndGradient(data, index, &grad);
+      } catch (const NumericalError& e) {
+        throw NumericalError(StrCat("training diverged at epoch ", epoch, ", batch ", b + 1, ": ",
+                                    e.what()));
+      }
+      if (!std::isfinite(loss) || !grad.allFinite()) {
+        throw NumericalError(StrCat("training diverged at epoch ", epoch, ", batch ", b + 1,
+                                    ": loss = ", loss, (grad.allFinite() ? "" : ", non-finite gradient"),
+                                    " (try a smaller --lr)"));
+      }
+      adam.Step(grad, &model_->mutable_parameters());
+      sum += loss;
+    }
+    EpochReport report;
+    report.epoch = epoch;
+    report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    report.train_loss = sum / batcher.num_batches();
+    report.val_loss = result.n_val > 0
+                          ? RolloutLoss(*model_, val, options_.gamma, options_.threads, options_.chunk_size)
+                          : std::numeric_limits<double>::quiet_NaN();
+    if (result.n_val > 0 && !std::isfinite(report.val_loss)) {
+      throw NumericalError(StrCat("validation loss is ", report.val_loss, " after epoch ", epoch));
+    }
+    times.push_back(report.seconds);
+    result.epochs.push_back(report);
+    bar.Update(epoch, StrCat("epoch ", epoch, " train ", report.train_loss, " val ", report.val_loss));
+    if (on_epoch) on_epoch(report);
+  }
+  bar.Finish();
+  std::vector<double> sorted = times;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  result.seconds_per_epoch = sorted[sorted.size() / 2];
+  result.final_train_loss = result.epochs.back().train_loss;
+  result.final_val_loss = result.epochs.back().val_loss;
+  return result;
+}
+
+}  // namespace diffdyn
