@@ -62,12 +62,15 @@ std::vector<PushingTrajectory> CollectPushingData(const CollectOptions& options,
         const Eigen::Vector3d action = SamplePushAction(rng);
         const PushResult r = env.Step(action);
         ++s.pushes;
-        s.max_tracking_error = std::max(s.max_tracking_error, r.max_tracking_error);
+        const bool touched = r.tip_hit_obstacle || r.block_hit_obstacle;
+        double& tracking = touched ? s.max_tracking_error_obstacle : s.max_tracking_error;
+        tracking = std::max(tracking, r.max_tracking_error);
         s.max_limit_violation = std::max(s.max_limit_violation, r.max_limit_violation);
         s.max_block_speed = std::max(s.max_block_speed, r.max_block_speed);
         s.min_block_z = std::min(s.min_block_z, r.min_block_z);
         s.max_block_z = std::max(s.max_block_z, r.max_block_z);
         s.tip_hit_obstacle += r.tip_hit_obstacle ? 1 : 0;
+        s.block_hit_obstacle += r.block_hit_obstacle ? 1 : 0;
         if (r.status == PushStatus::kUnreachable) {
           traj.status = PushStatusName(r.status);
           ++s.unreachable;
@@ -93,11 +96,14 @@ std::vector<PushingTrajectory> CollectPushingData(const CollectOptions& options,
       stats->off_table += s.off_table;
       stats->unreachable += s.unreachable;
       stats->max_tracking_error = std::max(stats->max_tracking_error, s.max_tracking_error);
+      stats->max_tracking_error_obstacle =
+          std::max(stats->max_tracking_error_obstacle, s.max_tracking_error_obstacle);
       stats->max_limit_violation = std::max(stats->max_limit_violation, s.max_limit_violation);
       stats->max_block_speed = std::max(stats->max_block_speed, s.max_block_speed);
       stats->min_block_z = std::min(stats->min_block_z, s.min_block_z);
       stats->max_block_z = std::max(stats->max_block_z, s.max_block_z);
       stats->tip_hit_obstacle += s.tip_hit_obstacle;
+      stats->block_hit_obstacle += s.block_hit_obstacle;
     }
   }
   if (options.progress) options.progress(n);

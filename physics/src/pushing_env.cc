@@ -139,6 +139,7 @@ struct PushingEnv::World {
   Vec7 home;
   bool arm_active = false;
   bool tip_hit_obstacle = false;
+  bool block_hit_obstacle = false;
   std::vector<Vec3> tip_path;
   std::vector<Vec7> joint_path;
 
@@ -301,6 +302,8 @@ struct PushingEnv::World {
     } else if (tip) {
       w->tip_hit_obstacle = true;
       mu = 0.5;
+    } else if (a == w->obstacle_geom || b == w->obstacle_geom) {
+      w->block_hit_obstacle = true;
     }
     for (int i = 0; i < n; ++i) {
       dContact contact{};
@@ -470,6 +473,7 @@ PushResult PushingEnv::Step(const Eigen::Vector3d& action) {
   w.tip_path.clear();
   w.joint_path.clear();
   w.tip_hit_obstacle = false;
+  w.block_hit_obstacle = false;
 
   PushResult result;
   const Vec3 pose = w.BlockPose();
@@ -506,6 +510,7 @@ PushResult PushingEnv::Step(const Eigen::Vector3d& action) {
   w.Track(approach, c.approach_speed, c.approach_acceleration, q_ref, result);
   if (push.length > 0) w.Track(push, c.push_speed, c.push_acceleration, q_ref, result);
   result.tip_hit_obstacle = w.tip_hit_obstacle;
+  result.block_hit_obstacle = w.block_hit_obstacle;
 
   // Lift the arm clear and let the block come to rest.
   w.SetArmActive(false);

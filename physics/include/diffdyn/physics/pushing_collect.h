@@ -53,11 +53,15 @@ struct CollectStats {
   long pushes = 0;                  ///< simulated actions
   int off_table = 0;                ///< trajectories ended with status off_table
   int unreachable = 0;              ///< trajectories ended with status unreachable
-  double max_tracking_error = 0;    ///< over all pushes (m)
+  /// Max tip-tracking error (m) over pushes where neither tip nor block touched the
+  /// obstacle; pushes against the obstacle stall the arm and are counted apart.
+  double max_tracking_error = 0;
+  double max_tracking_error_obstacle = 0;  ///< over pushes touching the obstacle (m)
   double max_limit_violation = 0;   ///< over all pushes (rad)
   double max_block_speed = 0;       ///< m/s
   double min_block_z = 0, max_block_z = 0;  ///< extremes of the block centre height (m)
   int tip_hit_obstacle = 0;         ///< pushes where the tip touched the obstacle
+  int block_hit_obstacle = 0;       ///< pushes where the block touched the obstacle
 };
 
 /// One uniform action of the seed's action space (u0, u1, u2).

@@ -85,6 +85,7 @@ struct PushResult {
   double max_block_z = 0;              ///< highest block centre z (m)
   int steps = 0;                       ///< dWorldStep calls (arm and settling)
   bool tip_hit_obstacle = false;       ///< the tip touched the obstacle
+  bool block_hit_obstacle = false;     ///< the block touched the obstacle while pushed
 };
 
 /// The ODE-engine pushing world; one per thread (see the file comment).
