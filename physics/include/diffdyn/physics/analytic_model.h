@@ -41,12 +41,10 @@
 #include <ceres/jet.h>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/jacobian.h"  // VectorX<T>
 
 namespace diffdyn {
 
-/// Dynamic-size column vector of scalar T.
-template <typename T>
-using VectorX = Eigen::Matrix<T, Eigen::Dynamic, 1>;
 /// Dynamic-size matrix of scalar T.
 template <typename T>
 using MatrixX = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>;
@@ -214,7 +212,10 @@ inline Eigen::VectorXd ParseParams(const AnalyticModel& model,
     // A 3-vector parameter given as name=a,b,c.
     const int ix = model.ParamIndex(name + "_x");
     std::string known;
-    for (const auto& spec : model.param_specs()) known += (known.empty() ? "" : ", ") + spec.name;
+    for (const auto& spec : model.param_specs()) {
+      if (!known.empty()) known += ", ";
+      known += spec.name;
+    }
     DIFFDYN_CHECK(ix >= 0, "--param ", assignment, ": model ", model.name(),
                   " has no parameter '", name, "' (it has: ", known, ")");
     std::vector<std::string> parts;

@@ -99,7 +99,8 @@ inline EffectKind ParseEffectKind(const std::string& name) {
   std::string known;
   for (const auto& info : AllEffectKinds()) {
     if (name == info.name) return info.kind;
-    known += (known.empty() ? "" : ", ") + std::string(info.name);
+    if (!known.empty()) known += ", ";
+    known += info.name;
   }
   throw Error(StrCat("unknown effect kind '", name, "' (known: ", known, ")"));
 }

@@ -30,6 +30,8 @@
 #include <cmath>
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "diffdyn/physics/analytic_model.h"
 #include "diffdyn/physics/panda.h"
 
