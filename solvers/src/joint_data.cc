@@ -1,0 +1,298 @@
+#include "diffdyn/solvers/joint_data.h"
+
+#include <array>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <numbers>
+#include <sstream>
+
+#include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/io.h"
+
+namespace diffdyn {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Splits a CSV line at commas, trimming spaces and a trailing carriage return.
+std::vector<std::string> SplitCsv(const std::string& line) {
+  std::vector<std::string> cells;
+  std::string cell;
+  std::stringstream in(line);
+  while (std::getline(in, cell, ',')) {
+    const auto begin = cell.find_first_not_of(" \t\r");
+    const auto end = cell.find_last_not_of(" \t\r");
+    cells.push_back(begin == std::string::npos ? "" : cell.substr(begin, end - begin + 1));
+  }
+  if (!line.empty() && line.back() == ',') cells.emplace_back();
+  return cells;
+}
+
+double ParseNumber(const std::string& text, const std::string& where) {
+  std::size_t used = 0;
+  double value = 0;
+  try {
+    value = std::stod(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  DIFFDYN_CHECK(used == text.size() && !text.empty() && std::isfinite(value), where, ": '", text,
+                "' is not a finite number");
+  return value;
+}
+
+// Reads a file of one number per line.
+std::vector<double> ReadColumnFile(const fs::path& path) {
+  std::ifstream in(path);
+  DIFFDYN_CHECK(in.good(), path.string(), ": cannot open");
+  std::vector<double> values;
+  std::string line;
+  for (int line_no = 1; std::getline(in, line); ++line_no) {
+    const auto begin = line.find_first_not_of(" \t\r");
+    if (begin == std::string::npos) continue;
+    const auto end = line.find_last_not_of(" \t\r");
+    values.push_back(
+        ParseNumber(line.substr(begin, end - begin + 1), StrCat(path.string(), ":", line_no)));
+  }
+  return values;
+}
+
+// Checks that time increases inside each segment.
+void CheckTime(const JointData& data) {
+  std::vector<int> starts = data.segment_starts;
+  starts.push_back(data.size());
+  for (std::size_t s = 0; s + 1 < starts.size(); ++s) {
+    DIFFDYN_CHECK(starts[s + 1] - starts[s] >= 3, data.path, ": segment ", s, " has fewer than 3 samples");
+    for (int k = starts[s] + 1; k < starts[s + 1]; ++k) {
+      DIFFDYN_CHECK(data.t[k] > data.t[k - 1], data.path, ": time does not increase at sample ",
+                    k + 1, " (t = ", data.t[k], " after ", data.t[k - 1], ")");
+    }
+  }
+}
+
+// Central-difference velocity of q inside each segment (one-sided at the ends).
+Eigen::MatrixXd Differentiate(const JointData& data) {
+  Eigen::MatrixXd qd(data.q.rows(), data.size());
+  std::vector<int> starts = data.segment_starts;
+  starts.push_back(data.size());
+  for (std::size_t s = 0; s + 1 < starts.size(); ++s) {
+    const int a = starts[s], b = starts[s + 1];
+    for (int k = a; k < b; ++k) {
+      const int lo = std::max(a, k - 1), hi = std::min(b - 1, k + 1);
+      qd.col(k) = (data.q.col(hi) - data.q.col(lo)) / (data.t[hi] - data.t[lo]);
+    }
+  }
+  return qd;
+}
+
+JointData ReadPandaGaz(const fs::path& dir) {
+  JointData data;
+  data.path = dir.string();
+  data.format = "panda-gaz2019";
+  const auto t = ReadColumnFile(dir / "exciting_traj_time.txt");
+  const auto q = ReadColumnFile(dir / "exciting_traj_positions.txt");
+  const auto qd = ReadColumnFile(dir / "exciting_traj_velocity.txt");
+  const auto tau = ReadColumnFile(dir / "exciting_traj_torques.txt");
+  const int n = 7, count = static_cast<int>(t.size());
+  for (const auto* file : {&q, &qd, &tau}) {
+    DIFFDYN_CHECK(static_cast<int>(file->size()) == n * count, dir.string(),
+                  ": expected 7 lines per sample (", n * count, " lines for ", count,
+                  " times), got ", file->size());
+  }
+  data.t = Eigen::Map<const Eigen::VectorXd>(t.data(), count);
+  data.q = Eigen::Map<const Eigen::MatrixXd>(q.data(), n, count);
+  data.qd = Eigen::Map<const Eigen::MatrixXd>(qd.data(), n, count);
+  data.tau = Eigen::Map<const Eigen::MatrixXd>(tau.data(), n, count);
+  data.notes = "Gaz et al. 2019 exciting trajectory 1 (real Panda): q, robot-reported qd, "
+               "link-side torque sensors; qdd estimated.";
+  CheckTime(data);
+  return data;
+}
+
+JointData ReadIbmRun(const fs::path& file) {
+  std::ifstream in(file);
+  DIFFDYN_CHECK(in.good(), file.string(), ": cannot open");
+  std::vector<std::array<double, 6>> rows;
+  std::string line;
+  for (int line_no = 1; std::getline(in, line); ++line_no) {
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    const auto cells = SplitCsv(line);
+    DIFFDYN_CHECK(cells.size() == 6, file.string(), ":", line_no, ": expected 6 pixel columns, got ",
+                  cells.size());
+    std::array<double, 6> row;
+    for (int c = 0; c < 6; ++c) row[c] = ParseNumber(cells[c], StrCat(file.string(), ":", line_no));
+    rows.push_back(row);
+  }
+  const int count = static_cast<int>(rows.size());
+  DIFFDYN_CHECK(count >= 10, file.string(), ": only ", count, " samples");
+  JointData data;
+  data.path = file.string();
+  data.format = "ibm-double-pendulum";
+  data.t.resize(count);
+  data.q.resize(2, count);
+  double len1 = 0, len2 = 0;
+  double prev1 = 0, prev2 = 0;
+  for (int k = 0; k < count; ++k) {
+    const auto& r = rows[k];
+    // Image y points down, so hanging down is +y: angle from hanging down.
+    const double phi1 = std::atan2(r[2] - r[0], r[3] - r[1]);
+    const double phi2 = std::atan2(r[4] - r[2], r[5] - r[3]);
+    double a1 = phi1, a2 = phi2 - phi1;
+    // Unwrap against the previous sample.
+    if (k > 0) {
+      a1 = prev1 + std::remainder(a1 - prev1, 2 * std::numbers::pi);
+      a2 = prev2 + std::remainder(a2 - prev2, 2 * std::numbers::pi);
+    }
+    prev1 = a1;
+    prev2 = a2;
+    data.q(0, k) = a1;
+    data.q(1, k) = a2;
+    data.t[k] = k / 400.0;
+    len1 += std::hypot(r[2] - r[0], r[3] - r[1]);
+    len2 += std::hypot(r[4] - r[2], r[5] - r[3]);
+  }
+  data.link_lengths_px = {len1 / count, len2 / count};
+  data.tau = Eigen::MatrixXd::Zero(2, count);
+  data.has_qd = false;
+  data.has_tau = false;
+  data.qd = Differentiate(data);
+  data.notes = StrCat("IBM double pendulum (real, 400 Hz camera), free motion; angles from the "
+                      "marker pixels; link lengths ", data.link_lengths_px[0], " px and ",
+                      data.link_lengths_px[1], " px; qd, qdd estimated from q.");
+  return data;
+}
+
+JointData ReadDelan(const fs::path& file) {
+  JointData data = ReadJointCsv(file.string());
+  data.format = "delan-characters";
+  data.notes = "DeLaN character data (simulated 2-link arm), one segment per character.";
+  return data;
+}
+
+}  // namespace
+
+JointData ReadJointCsv(const std::string& path) {
+  std::ifstream in(path);
+  DIFFDYN_CHECK(in.good(), path, ": cannot open");
+  std::string line;
+  DIFFDYN_CHECK(static_cast<bool>(std::getline(in, line)), path, ":1: empty file");
+  const auto header = SplitCsv(line);
+  std::map<std::string, int> column;
+  for (int c = 0; c < static_cast<int>(header.size()); ++c) {
+    DIFFDYN_CHECK(!column.count(header[c]), path, ":1: duplicate column '", header[c], "'");
+    column[header[c]] = c;
+  }
+  DIFFDYN_CHECK(column.count("t"), path, ":1: no column 't'");
+  int n = 0;
+  while (column.count(StrCat("q", n + 1))) ++n;
+  DIFFDYN_CHECK(n > 0, path, ":1: no column 'q1'");
+  const bool has_qd = column.count("qd1") > 0;
+  const bool has_qdd = column.count("qdd1") > 0;
+  for (int j = 1; j <= n; ++j) {
+    DIFFDYN_CHECK(column.count(StrCat("tau", j)), path, ":1: no column 'tau", j, "' (", n,
+                  " joints from q1..q", n, ")");
+    DIFFDYN_CHECK(!has_qd || column.count(StrCat("qd", j)), path, ":1: no column 'qd", j, "'");
+    DIFFDYN_CHECK(!has_qdd || column.count(StrCat("qdd", j)), path, ":1: no column 'qdd", j, "'");
+  }
+  DIFFDYN_CHECK(!column.count(StrCat("q", n + 2)), path, ":1: q columns are not contiguous");
+  // Column indices of every field.
+  std::vector<int> cq(n), cqd(n), cqdd(n), ctau(n);
+  for (int j = 0; j < n; ++j) {
+    cq[j] = column[StrCat("q", j + 1)];
+    ctau[j] = column[StrCat("tau", j + 1)];
+    if (has_qd) cqd[j] = column[StrCat("qd", j + 1)];
+    if (has_qdd) cqdd[j] = column[StrCat("qdd", j + 1)];
+  }
+  std::vector<double> t, q, qd, qdd, tau;
+  std::vector<int> starts = {0};
+  for (int line_no = 2; std::getline(in, line); ++line_no) {
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    const auto cells = SplitCsv(line);
+    DIFFDYN_CHECK(cells.size() == header.size(), path, ":", line_no, ": ", cells.size(),
+                  " cells, the header has ", header.size());
+    const std::string where = StrCat(path, ":", line_no);
+    const double time = ParseNumber(cells[column["t"]], where);
+    // A time that goes back starts a new segment only if t restarts at its first value.
+    if (!t.empty() && time <= t.back()) {
+      DIFFDYN_CHECK(std::abs(time - t[starts.back()]) < 1e-12, where,
+                    ": time does not increase (t = ", time, " after ", t.back(), ")");
+      starts.push_back(static_cast<int>(t.size()));
+    }
+    t.push_back(time);
+    for (int j = 0; j < n; ++j) {
+      q.push_back(ParseNumber(cells[cq[j]], where));
+      tau.push_back(ParseNumber(cells[ctau[j]], where));
+      if (has_qd) qd.push_back(ParseNumber(cells[cqd[j]], where));
+      if (has_qdd) qdd.push_back(ParseNumber(cells[cqdd[j]], where));
+    }
+  }
+  const int count = static_cast<int>(t.size());
+  DIFFDYN_CHECK(count >= 3, path, ": only ", count, " samples");
+  JointData data;
+  data.path = path;
+  data.format = "csv";
+  data.t = Eigen::Map<const Eigen::VectorXd>(t.data(), count);
+  data.q = Eigen::Map<const Eigen::MatrixXd>(q.data(), n, count);
+  data.tau = Eigen::Map<const Eigen::MatrixXd>(tau.data(), n, count);
+  if (has_qdd) data.qdd = Eigen::Map<const Eigen::MatrixXd>(qdd.data(), n, count);
+  data.segment_starts = starts;
+  CheckTime(data);
+  data.has_qd = has_qd;
+  data.qd = has_qd ? Eigen::MatrixXd(Eigen::Map<const Eigen::MatrixXd>(qd.data(), n, count))
+                   : Differentiate(data);
+  return data;
+}
+
+JointData ReadMeasured(const std::string& path) {
+  const fs::path p(path);
+  DIFFDYN_CHECK(fs::exists(p), "--measured ", path, ": no such file or directory");
+  if (fs::is_directory(p)) {
+    if (fs::exists(p / "exciting_traj_positions.txt")) return ReadPandaGaz(p);
+    if (fs::exists(p / "character_data.csv")) return ReadDelan(p / "character_data.csv");
+    if (fs::exists(p / "0.csv")) return ReadIbmRun(p / "0.csv");
+    throw Error(StrCat("--measured ", path,
+                       ": folder is not a known dataset (Panda Gaz 2019, IBM double pendulum, "
+                       "DeLaN characters)"));
+  }
+  // A headerless file of 6 integers per line is an IBM run.
+  std::ifstream in(p);
+  DIFFDYN_CHECK(in.good(), "--measured ", path, ": cannot open");
+  std::string first;
+  std::getline(in, first);
+  const auto cells = SplitCsv(first);
+  bool numeric = cells.size() == 6;
+  for (const auto& c : cells) numeric = numeric && !c.empty() && c.find_first_not_of("-0123456789") == std::string::npos;
+  if (numeric) return ReadIbmRun(p);
+  if (p.filename() == "character_data.csv") return ReadDelan(p);
+  return ReadJointCsv(path);
+}
+
+void WriteJointCsv(const std::string& path, const JointData& data) {
+  const int n = data.dof();
+  const bool with_qdd = data.qdd.cols() == data.size() && data.qdd.rows() == n;
+  WriteFileAtomically(path, [&](std::ostream& out) {
+    out.precision(17);
+    out << "t";
+    for (int j = 1; j <= n; ++j) out << ",q" << j;
+    for (int j = 1; j <= n; ++j) out << ",qd" << j;
+    if (with_qdd) {
+      for (int j = 1; j <= n; ++j) out << ",qdd" << j;
+    }
+    for (int j = 1; j <= n; ++j) out << ",tau" << j;
+    out << "\n";
+    for (int k = 0; k < data.size(); ++k) {
+      out << data.t[k];
+      for (int j = 0; j < n; ++j) out << "," << data.q(j, k);
+      for (int j = 0; j < n; ++j) out << "," << data.qd(j, k);
+      if (with_qdd) {
+        for (int j = 0; j < n; ++j) out << "," << data.qdd(j, k);
+      }
+      for (int j = 0; j < n; ++j) out << "," << data.tau(j, k);
+      out << "\n";
+    }
+  });
+}
+
+}  // namespace diffdyn

@@ -1,0 +1,90 @@
+#include "diffdyn/solvers/smoothing.h"
+
+#include <cmath>
+#include <numbers>
+
+#include "diffdyn/autodiff_ode/check.h"
+
+namespace diffdyn {
+
+double SmoothedData::IndependentRate() const {
+  return 1.0 / (2.0 * std::sqrt(std::numbers::pi) * sigma_t);
+}
+
+SmoothedData SmoothJointData(const JointData& data, double cutoff_hz) {
+  DIFFDYN_CHECK(cutoff_hz > 0 && std::isfinite(cutoff_hz), "--cutoff-hz ", cutoff_hz,
+                ": must be a positive frequency");
+  const int n = data.dof(), count = data.size();
+  SmoothedData out;
+  out.cutoff_hz = cutoff_hz;
+  out.sigma_t = std::sqrt(std::log(2.0)) / (2.0 * std::numbers::pi * cutoff_hz);
+  out.t = data.t;
+  out.q_raw = data.q;
+  out.qd_raw = data.qd;
+  out.tau_raw = data.tau;
+  out.q.resize(n, count);
+  out.qd.resize(n, count);
+  out.qdd.resize(n, count);
+  out.tau.resize(n, count);
+  out.dtau.resize(n, count);
+  out.segment_of.assign(count, 0);
+  out.segment_bounds = data.segment_starts;
+  out.segment_bounds.push_back(count);
+  const bool has_qdd = data.qdd.rows() == n && data.qdd.cols() == count;
+  const double s = out.sigma_t, reach = 4.0 * s;
+
+  Eigen::VectorXd noise_sum = Eigen::VectorXd::Zero(n);
+  int noise_count = 0;
+  for (std::size_t seg = 0; seg + 1 < out.segment_bounds.size(); ++seg) {
+    const int begin = out.segment_bounds[seg], end = out.segment_bounds[seg + 1];
+    double last_row_time = -1e300;
+    int lo = begin, hi = begin;
+    for (int k = begin; k < end; ++k) {
+      out.segment_of[k] = static_cast<int>(seg);
+      const double t0 = data.t[k];
+      while (data.t[lo] < t0 - reach) ++lo;
+      while (hi < end && data.t[hi] <= t0 + reach) ++hi;
+      // Local-linear Gaussian weights alpha (value) and beta (slope).
+      const int m = hi - lo;
+      Eigen::VectorXd w(m), u(m);
+      double s0 = 0, s1 = 0, s2 = 0;
+      for (int i = 0; i < m; ++i) {
+        u[i] = data.t[lo + i] - t0;
+        w[i] = std::exp(-0.5 * u[i] * u[i] / (s * s));
+        s0 += w[i];
+        s1 += w[i] * u[i];
+        s2 += w[i] * u[i] * u[i];
+      }
+      const double det = s0 * s2 - s1 * s1;
+      DIFFDYN_CHECK(det > 0, data.path, ": fewer than 2 samples within ", reach,
+                    " s of t = ", t0, "; raise --cutoff-hz or check the time column");
+      const Eigen::VectorXd alpha = (w.array() * (s2 - u.array() * s1) / det).matrix();
+      const Eigen::VectorXd beta = (w.array() * (u.array() * s0 - s1) / det).matrix();
+      out.q.col(k) = data.q.middleCols(lo, m) * alpha;
+      out.qd.col(k) = data.qd.middleCols(lo, m) * alpha;
+      out.qdd.col(k) = has_qdd ? Eigen::VectorXd(data.qdd.middleCols(lo, m) * alpha)
+                               : Eigen::VectorXd(data.qd.middleCols(lo, m) * beta);
+      out.tau.col(k) = data.tau.middleCols(lo, m) * alpha;
+      out.dtau.col(k) = data.tau.middleCols(lo, m) * beta;
+      // Interior samples: noise estimate and (decimated) fitting rows.
+      const bool interior = t0 - data.t[begin] >= 3 * s && data.t[end - 1] - t0 >= 3 * s;
+      if (interior) {
+        noise_sum += (data.tau.col(k) - out.tau.col(k)).array().square().matrix();
+        ++noise_count;
+        if (t0 >= last_row_time + 0.75 * s) {
+          last_row_time = t0;
+          out.rows.push_back(k);
+          out.kernel_begin.push_back(lo);
+          out.kernel_alpha.push_back(alpha);
+        }
+      }
+    }
+  }
+  DIFFDYN_CHECK(out.rows.size() >= 10, data.path, ": only ", out.rows.size(),
+                " usable samples after smoothing at --cutoff-hz ", cutoff_hz,
+                " (the record is too short for this cutoff)");
+  out.tau_noise = (noise_sum / std::max(1, noise_count)).array().sqrt().matrix();
+  return out;
+}
+
+}  // namespace diffdyn
