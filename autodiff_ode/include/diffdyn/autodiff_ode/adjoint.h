@@ -211,8 +211,9 @@ class BatchedOdeSolver {
     return stats;
   }
 
-  /// Accepted steps of the last Forward: start times t_k and sizes h_k.
+  /// Start times t_k of the accepted steps of the last Forward (num_steps()).
   const std::vector<double>& step_times() const { return step_t_; }
+  /// Sizes h_k of the accepted steps of the last Forward (num_steps()).
   const std::vector<double>& step_sizes() const { return step_h_; }
   /// Number of accepted steps done when times[i] was reached (output_steps()[0] = 0).
   const std::vector<int>& output_steps() const { return output_steps_; }

@@ -53,13 +53,21 @@ inline constexpr int kMaxStages = 7;
 /// a is s x s strictly lower triangular (a[i][j] for j < i), b and c have s entries;
 /// b_hat (embedded weights, order `order - 1`) is all zero for fixed-step methods.
 struct ButcherTableau {
+  /// The command-line name ("rk4", "dopri5", ...).
   const char* name;
+  /// s, the number of stages.
   int stages;
+  /// p, the order of the solution weighted by b.
   int order;
+  /// True for embedded pairs (b_hat set, adaptive step size).
   bool adaptive;
+  /// A (s x s used of kMaxStages x kMaxStages), strictly lower triangular.
   std::array<std::array<double, kMaxStages>, kMaxStages> a;
+  /// b, the solution weights (s used).
   std::array<double, kMaxStages> b;
+  /// c, the stage times as fractions of h (s used); c_i = sum_j a_ij.
   std::array<double, kMaxStages> c;
+  /// b_hat, the embedded weights of order p - 1 (zero for fixed-step methods).
   std::array<double, kMaxStages> b_hat;
 
   /// True when the last stage is f(x_{n+1}, t_n + h): last row of A equals b, c_s = 1.

@@ -87,7 +87,7 @@ struct EigenJetAlgebra {
       for (Eigen::Index i = 0; i < size; ++i) op(std::get<I>(refs)[i]...);
     }(std::make_index_sequence<kStates>{});
   }
-  // odeint calls for_each1 .. for_each15 with (states..., op).
+  /// odeint's interface: for_eachN(s1, ..., sN, op) = ForEach(s1, ..., sN, op), N = 1..15.
   template <typename... A> static void for_each1(A&&... a) { ForEach(a...); }
   template <typename... A> static void for_each2(A&&... a) { ForEach(a...); }
   template <typename... A> static void for_each3(A&&... a) { ForEach(a...); }
@@ -203,8 +203,9 @@ struct OdeOptions {
   /// Fixed-step methods: the largest step (each output interval is split into
   /// ceil(|interval| / dt) equal steps). Adaptive methods: the first trial step.
   double dt = 1e-2;
-  /// Adaptive methods: absolute and relative tolerance of the local error.
+  /// Adaptive methods: absolute tolerance of the local error.
   double abs_tol = 1e-8;
+  /// Adaptive methods: relative tolerance of the local error.
   double rel_tol = 1e-8;
   /// Accepted plus rejected steps before diffdyn::NumericalError.
   long max_steps = 1'000'000;
@@ -214,7 +215,9 @@ struct OdeOptions {
 
 /// Counts of one integration.
 struct IntegrationStats {
+  /// Steps taken (fixed-step methods: all steps).
   long accepted_steps = 0;
+  /// Trial steps rejected by the error control (adaptive methods only).
   long rejected_steps = 0;
 };
 
