@@ -32,8 +32,11 @@ Eigen::Vector3d SampleStartPose(StartDistribution starts, Rng& rng) {
   while (true) {
     const Eigen::Vector3d pose(Uniform(rng, 0.35, 0.85), Uniform(rng, -0.35, 0.15),
                                Uniform(rng, -kPi / 2, kPi / 2));
-    // 1 cm clearance: a block 2 cm larger must not touch the obstacle.
-    if (PushingEnv::ObstaclePenetration(pose, 0.12) == 0) return pose;
+    // 1 cm clearance from the obstacle (a block 2 cm larger must not touch it), and
+    // within 0.72 m of the arm's base, so that pushes from the far side stay reachable.
+    if (PushingEnv::ObstaclePenetration(pose, 0.12) == 0 && pose.head<2>().norm() <= 0.72) {
+      return pose;
+    }
   }
 }
 
@@ -66,9 +69,12 @@ std::vector<PushingTrajectory> CollectPushingData(const CollectOptions& options,
         double& tracking = touched ? s.max_tracking_error_obstacle : s.max_tracking_error;
         tracking = std::max(tracking, r.max_tracking_error);
         s.max_limit_violation = std::max(s.max_limit_violation, r.max_limit_violation);
-        s.max_block_speed = std::max(s.max_block_speed, r.max_block_speed);
-        s.min_block_z = std::min(s.min_block_z, r.min_block_z);
-        s.max_block_z = std::max(s.max_block_z, r.max_block_z);
+        // A block pushed off the table falls: its height and speed say nothing then.
+        if (r.status == PushStatus::kOk) {
+          s.max_block_speed = std::max(s.max_block_speed, r.max_block_speed);
+          s.min_block_z = std::min(s.min_block_z, r.min_block_z);
+          s.max_block_z = std::max(s.max_block_z, r.max_block_z);
+        }
         s.tip_hit_obstacle += r.tip_hit_obstacle ? 1 : 0;
         s.block_hit_obstacle += r.block_hit_obstacle ? 1 : 0;
         if (r.status == PushStatus::kUnreachable) {

@@ -360,7 +360,18 @@ struct PushingEnv::World {
 
   // Drives the arm along a segment under a trapezoidal profile with the hinge motors.
   void Track(const Segment& seg, double speed, double accel, Vec7& q_ref, PushResult& result) {
-    const Trapezoid profile(seg.length, speed, accel);
+    // Near the edge of the workspace dq/ds grows: slow down so that no joint needs
+    // more than half its velocity limit (keeps the tip on the path).
+    double limit = speed;
+    for (size_t i = 1; i < seg.q.size(); ++i) {
+      const double ds = std::min(seg.length, i * kWaypoint) - (i - 1) * kWaypoint;
+      if (ds <= 0) continue;
+      for (int j = 0; j < 7; ++j) {
+        const double rate = std::abs(seg.q[i][j] - seg.q[i - 1][j]) / ds;  // rad per m
+        if (rate > 0) limit = std::min(limit, 0.5 * Panda::kDqMax[j] / rate);
+      }
+    }
+    const Trapezoid profile(seg.length, limit, accel * limit / speed);
     const int n = static_cast<int>(std::ceil(profile.duration / config.time_step - 1e-9));
     for (int k = 0; k < n; ++k) {
       const double s = profile.At((k + 1) * config.time_step);
