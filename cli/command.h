@@ -44,5 +44,7 @@ int Run(int argc, char** argv);
 void RegisterInfoCommand(CLI::App& app);
 void RegisterDemoCommand(CLI::App& app);
 void RegisterCollectCommand(CLI::App& app);
+void RegisterTrainCommand(CLI::App& app);
+void RegisterEvalCommand(CLI::App& app);
 
 }  // namespace diffdyn::cli

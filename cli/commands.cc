@@ -6,7 +6,9 @@ namespace diffdyn::cli {
 void RegisterCommands(CLI::App& app) {
   RegisterCollectCommand(app);
   RegisterDemoCommand(app);
+  RegisterEvalCommand(app);
   RegisterInfoCommand(app);
+  RegisterTrainCommand(app);
 }
 
 }  // namespace diffdyn::cli
