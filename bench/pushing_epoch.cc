@@ -1,0 +1,102 @@
+// One training epoch of the absolute NeuralODE (6-100-100-6 ReLU, rk4 3/8 rule on 10
+// grid points = 9 steps, double) on 1000 transitions of the shared PyBullet data in
+// batches of 500 with Adam, on 1 and 2 threads; the same with dopri5 (tolerance 1e-8)
+// for the dopri5 / rk4 ratio; and the machine's peak: the best two-thread
+// double-precision matrix product at 2048^3 (Eigen, columns split over two threads).
+// The PyTorch reference of the same epoch is bench/pushing_epoch_torch.py.
+//
+// Counters: "GFLOP/s" counts the useful matrix flops of an epoch as PyTorch does
+// them (forward + 2 x forward for backward = 3 x 2 x 11,200 per MLP evaluation, 36
+// evaluations per sample with rk4; our backward recomputes each stage's forward, which
+// is not counted); divide by BM_PeakDgemm2Threads's GFLOP/s for the fraction of peak.
+//
+//   OPENBLAS_NUM_THREADS=1 build/bench/bench_pushing_epoch   (from the repository root;
+//   DIFFDYN_PUSHING_CSV=path overrides the data file)
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "diffdyn/autodiff_ode/parallel.h"
+#include "diffdyn/solvers/pushing_training.h"
+
+namespace diffdyn {
+namespace {
+
+constexpr int kTransitions = 1000;
+constexpr int kPeakSize = 2048;
+
+const PushingWindows& Data() {
+  static const PushingWindows data = [] {
+    // Run from the repository root (scripts/run-bench does), or name the file.
+    const char* env = std::getenv("DIFFDYN_PUSHING_CSV");
+    const std::string path =
+        env ? env : "../shared/data/pybullet_pushing/collected_data.csv";
+    const auto all = MakePushingWindows(ReadPushingData(path), 1);
+    std::vector<int> first(kTransitions);
+    std::iota(first.begin(), first.end(), 0);
+    return SelectWindows(all, first);
+  }();
+  return data;
+}
+
+// Multiply-adds of one MLP evaluation 6-100-100-6, times 2 flops.
+constexpr double kFlopsPerEval = 2.0 * (6 * 100 + 100 * 100 + 100 * 6);
+
+void RunEpochs(benchmark::State& state, Method method) {
+  const int threads = static_cast<int>(state.range(0));
+  PushingModelConfig config;
+  config.type = PushingModelType::kAbsNode;
+  config.method = method;
+  config.steps = 10;
+  config.hidden = 100;
+  PushingModel model = PushingModel::Initialized(config, 1);
+  TrainOptions options;
+  options.epochs = 1;
+  options.batch_size = 500;
+  options.val_fraction = 0.0;
+  options.threads = threads;
+  options.progress = false;
+  Trainer trainer(&model, options);
+  trainer.Train(Data());  // warm-up: buffers sized
+  for (auto _ : state) {
+    const TrainResult r = trainer.Train(Data());
+    benchmark::DoNotOptimize(r.final_train_loss);
+  }
+  if (method == Method::kRk4) {
+    const double flops = 3.0 * kFlopsPerEval * 36 * kTransitions;
+    state.counters["GFLOP/s"] =
+        benchmark::Counter(flops * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
+    state.counters["epoch_flops_G"] = flops * 1e-9;
+  }
+}
+
+void BM_EpochAbsNodeRk4(benchmark::State& state) { RunEpochs(state, Method::kRk4); }
+BENCHMARK(BM_EpochAbsNodeRk4)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(2.0);
+
+void BM_EpochAbsNodeDopri5(benchmark::State& state) { RunEpochs(state, Method::kDopri5); }
+BENCHMARK(BM_EpochAbsNodeDopri5)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(2.0);
+
+// The peak: C = A B at 2048^3 with the columns of C split over two threads.
+void BM_PeakDgemm2Threads(benchmark::State& state) {
+  const Eigen::MatrixXd a = Eigen::MatrixXd::Constant(kPeakSize, kPeakSize, 0.5);
+  const Eigen::MatrixXd b = Eigen::MatrixXd::Constant(kPeakSize, kPeakSize, 0.25);
+  Eigen::MatrixXd c(kPeakSize, kPeakSize);
+  for (auto _ : state) {
+    ParallelForChunks(kPeakSize, kPeakSize / 2, 2, [&](int, int begin, int end) {
+      c.middleCols(begin, end - begin).noalias() = a * b.middleCols(begin, end - begin);
+    });
+    benchmark::DoNotOptimize(c.data());
+  }
+  const double flops = 2.0 * kPeakSize * kPeakSize * double(kPeakSize);
+  state.counters["GFLOP/s"] = benchmark::Counter(flops * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_PeakDgemm2Threads)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(2.0);
+
+}  // namespace
+}  // namespace diffdyn
+
+BENCHMARK_MAIN();

@@ -1,0 +1,155 @@
+#!/usr/bin/env python3
+"""PyTorch reference for bench/pushing_epoch.cc.
+
+One training epoch of the absolute NeuralODE of the NeuralODE-Panda paper in plain
+PyTorch, float64, single-threaded: z0 = [x, u] (6), dz/dt = MLP(z) (6-100-100-6,
+ReLU), Kutta's 3/8-rule RK4 over 9 equal steps on [0, 1] written out in torch (what
+torchdiffeq's "rk4" does, without its bookkeeping), autograd back through the
+solver, SE(2) pose loss, Adam lr 1e-3, 1000 transitions of the shared data in
+shuffled batches of 500. Prints the BLAS torch uses and, if the C++ results of the
+same run are next to --out (pushing_epoch.json), the ratios.
+
+    OPENBLAS_NUM_THREADS=1 /usr/bin/python3 bench/pushing_epoch_torch.py --out r.json
+"""
+import argparse
+import csv
+import json
+import math
+import os
+import time
+
+import torch
+
+TRANSITIONS = 1000
+BATCH = 500
+RG = math.sqrt((0.1 ** 2 + 0.1 ** 2) / 12)
+
+
+def blas_in_use():
+    """Shared BLAS libraries mapped into this process (after a matmul)."""
+    torch.ones(64, 64, dtype=torch.float64) @ torch.ones(64, 64, dtype=torch.float64)
+    libs = set()
+    with open("/proc/self/maps") as maps:
+        for line in maps:
+            path = line.split()[-1]
+            if "blas" in path or "mkl" in path or "atlas" in path:
+                libs.add(os.path.realpath(path))
+    return sorted(libs)
+
+
+def load(path):
+    """First TRANSITIONS (x_t, u_t, x_{t+1}) of the pushing CSV."""
+    rows = list(csv.DictReader(open(path)))
+    xs, us, ys = [], [], []
+    for a, b in zip(rows, rows[1:]):
+        if a["push_length"] == "" or a["trajectory"] != b["trajectory"]:
+            continue
+        xs.append([float(a[k]) for k in ("x", "y", "theta")])
+        us.append([float(a[k]) for k in ("push_location", "push_angle", "push_length")])
+        ys.append([float(b[k]) for k in ("x", "y", "theta")])
+        if len(xs) == TRANSITIONS:
+            break
+    t = lambda v: torch.tensor(v, dtype=torch.float64)
+    return t(xs), t(us), t(ys)
+
+
+class AbsNode(torch.nn.Module):
+    def __init__(self, hidden=100, steps=10, method="rk4"):
+        super().__init__()
+        self.net = torch.nn.Sequential(
+            torch.nn.Linear(6, hidden), torch.nn.ReLU(),
+            torch.nn.Linear(hidden, hidden), torch.nn.ReLU(),
+            torch.nn.Linear(hidden, 6)).double()
+        self.steps = steps
+
+    def forward(self, x, u):
+        z = torch.cat([x, u], dim=1)
+        h = 1.0 / (self.steps - 1)
+        f = self.net
+        for _ in range(self.steps - 1):
+            k1 = f(z)
+            k2 = f(z + h * k1 / 3)
+            k3 = f(z + h * (k2 - k1 / 3))
+            k4 = f(z + h * (k1 - k2 + k3))
+            z = z + h * (k1 + 3 * k2 + 3 * k3 + k4) / 8
+        return z[:, :3]
+
+
+def se2(pred, target):
+    d = pred - target
+    return (d[:, 0] ** 2).mean() + (d[:, 1] ** 2).mean() + RG * (d[:, 2] ** 2).mean()
+
+
+def epoch(model, opt, x, u, y, gen):
+    order = torch.randperm(x.shape[0], generator=gen)
+    for i in range(0, x.shape[0], BATCH):
+        idx = order[i:i + BATCH]
+        opt.zero_grad()
+        loss = se2(model(x[idx], u[idx]), y[idx])
+        loss.backward()
+        opt.step()
+    return loss.item()
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--out", default="pushing_epoch_torch.json")
+    parser.add_argument("--data", default=os.environ.get(
+        "DIFFDYN_PUSHING_CSV", "../shared/data/pybullet_pushing/collected_data.csv"))
+    parser.add_argument("--repeats", type=int, default=7)
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    torch.manual_seed(1)
+    blas = blas_in_use()
+    print("torch", torch.__version__, "threads", torch.get_num_threads(),
+          "OPENBLAS_NUM_THREADS", os.environ.get("OPENBLAS_NUM_THREADS"))
+    print("BLAS in use:", ", ".join(blas) if blas else "(none found in /proc/self/maps)")
+    x, u, y = load(args.data)
+    model = AbsNode()
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    gen = torch.Generator().manual_seed(2)
+    epoch(model, opt, x, u, y, gen)  # warm-up
+    # Wall time, and process CPU time (robust when other jobs share the cores).
+    times, cpu = [], []
+    for _ in range(args.repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        epoch(model, opt, x, u, y, gen)
+        times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    times.sort()
+    cpu.sort()
+    median = times[len(times) // 2]
+    median_cpu = cpu[len(cpu) // 2]
+    print(f"abs-NODE rk4 (10 grid points) epoch, {TRANSITIONS} transitions, batch {BATCH}, "
+          f"float64: median {median * 1e3:.1f} ms wall, {median_cpu * 1e3:.1f} ms CPU over {args.repeats}")
+    result = {"epoch_abs_node_rk4_seconds": median, "epoch_abs_node_rk4_cpu_seconds": median_cpu, "blas": blas, "torch": torch.__version__}
+    with open(args.out, "w") as f:
+        json.dump(result, f)
+    # Side by side with the C++ run written next to --out.
+    ours_path = os.path.join(os.path.dirname(os.path.abspath(args.out)), "pushing_epoch.json")
+    if os.path.exists(ours_path):
+        bench = {b["name"]: b for b in json.load(open(ours_path))["benchmarks"]}
+        def ms(name):
+            b = bench.get(name)
+            return None if b is None else b["real_time"] * {"ms": 1e-3, "us": 1e-6, "ns": 1e-9, "s": 1}[b["time_unit"]]
+        one, two = ms("BM_EpochAbsNodeRk4/1/min_time:2.000/real_time"), ms("BM_EpochAbsNodeRk4/2/min_time:2.000/real_time")
+        dopri = ms("BM_EpochAbsNodeDopri5/2/min_time:2.000/real_time")
+        peak = bench.get("BM_PeakDgemm2Threads/min_time:2.000/real_time", {}).get("GFLOP/s")
+        if one and two:
+            print(f"ours: {one * 1e3:.1f} ms (1 thread), {two * 1e3:.1f} ms (2 threads); "
+                  f"PyTorch / ours = {median / one:.2f}x (1 thread), {median / two:.2f}x (2 threads)")
+            flops = bench["BM_EpochAbsNodeRk4/2/min_time:2.000/real_time"].get("epoch_flops_G")
+            if peak and flops:
+                print(f"2 threads: {flops / two:.1f} GFLOP/s = {100 * flops / two / peak:.0f}% of the "
+                      f"measured peak {peak:.1f} GFLOP/s; PyTorch {flops / median:.1f} GFLOP/s")
+        b1 = bench.get("BM_EpochAbsNodeRk4/1/min_time:2.000/real_time")
+        if b1:
+            cpu1 = b1["cpu_time"] * {"ms": 1e-3, "us": 1e-6, "ns": 1e-9, "s": 1}[b1["time_unit"]]
+            print(f"CPU time, 1 thread each: ours {cpu1 * 1e3:.1f} ms, PyTorch {median_cpu * 1e3:.1f} ms, "
+                  f"PyTorch / ours = {median_cpu / cpu1:.2f}x")
+        if dopri and two:
+            print(f"dopri5 / rk4 epoch time (2 threads): {dopri / two:.1f}x")
+
+
+if __name__ == "__main__":
+    main()
