@@ -42,6 +42,7 @@ int Run(int argc, char** argv);
 
 // One registration function per command file.
 void RegisterInfoCommand(CLI::App& app);
+void RegisterDiagnoseCommand(CLI::App& app);
 void RegisterDemoCommand(CLI::App& app);
 void RegisterCollectCommand(CLI::App& app);
 void RegisterTrainCommand(CLI::App& app);

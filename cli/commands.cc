@@ -6,6 +6,7 @@ namespace diffdyn::cli {
 void RegisterCommands(CLI::App& app) {
   RegisterCollectCommand(app);
   RegisterDemoCommand(app);
+  RegisterDiagnoseCommand(app);
   RegisterEvalCommand(app);
   RegisterInfoCommand(app);
   RegisterTrainCommand(app);

@@ -6,6 +6,7 @@
 #include <functional>
 #include <limits>
 #include <numeric>
+#include <tuple>
 
 #include <ceres/ceres.h>
 #include <Eigen/Cholesky>
@@ -101,40 +102,34 @@ Eigen::VectorXd Sse(const Context& ctx, const Eigen::MatrixXd& prediction,
   return sse;
 }
 
-// Ceres cost: weighted torque residuals of the extended model at the given rows.
+// Ceres cost: weighted torque residuals of the extended model at the given
+// rows, with the effect parameters `free` (indices into theta, at most
+// kDiagJetSize) as the one parameter block and the others fixed at `base`.
 class RefitCost : public ceres::CostFunction {
  public:
   RefitCost(const Context& ctx, const ExtendedModel& ext, const std::vector<int>& rows,
-            const Eigen::VectorXd& inv_sigma)
-      : ctx_(ctx), ext_(ext), rows_(rows), inv_sigma_(inv_sigma) {
+            const Eigen::VectorXd& inv_sigma, std::vector<int> free, Eigen::VectorXd base)
+      : ctx_(ctx), ext_(ext), rows_(rows), inv_sigma_(inv_sigma), free_(std::move(free)),
+        base_(std::move(base)) {
     set_num_residuals(ctx.n * static_cast<int>(rows.size()));
-    mutable_parameter_block_sizes()->push_back(static_cast<int>(ext.EffectParams().size()));
+    mutable_parameter_block_sizes()->push_back(static_cast<int>(free_.size()));
   }
 
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
-    const int p = parameter_block_sizes()[0];
+    const int p = static_cast<int>(free_.size());
     const int n = ctx_.n;
-    if (jacobians == nullptr || jacobians[0] == nullptr) {
-      const Eigen::VectorXd theta = Eigen::Map<const Eigen::VectorXd>(parameters[0], p);
-      for (std::size_t i = 0; i < rows_.size(); ++i) {
-        const Eigen::VectorXd pred = PredictRow<double>(ctx_, ext_, theta, rows_[i]);
-        for (int j = 0; j < n; ++j) {
-          residuals[i * n + j] = (pred[j] - ctx_.tau(j, rows_[i])) * inv_sigma_[j];
-          if (!std::isfinite(residuals[i * n + j])) return false;
-        }
-      }
-      return true;
-    }
-    VectorX<DiagJet> theta(p);
-    for (int i = 0; i < p; ++i) theta[i] = DiagJet(parameters[0][i], i);
+    VectorX<DiagJet> theta = base_.cast<DiagJet>();
+    for (int i = 0; i < p; ++i) theta[free_[i]] = DiagJet(parameters[0][i], i);
     for (std::size_t i = 0; i < rows_.size(); ++i) {
       const VectorX<DiagJet> pred = PredictRow<DiagJet>(ctx_, ext_, theta, rows_[i]);
       for (int j = 0; j < n; ++j) {
         const int row = static_cast<int>(i) * n + j;
         residuals[row] = (pred[j].a - ctx_.tau(j, rows_[i])) * inv_sigma_[j];
         if (!std::isfinite(residuals[row])) return false;
-        for (int c = 0; c < p; ++c) jacobians[0][row * p + c] = pred[j].v[c] * inv_sigma_[j];
+        if (jacobians != nullptr && jacobians[0] != nullptr) {
+          for (int c = 0; c < p; ++c) jacobians[0][row * p + c] = pred[j].v[c] * inv_sigma_[j];
+        }
       }
     }
     return true;
@@ -145,49 +140,71 @@ class RefitCost : public ceres::CostFunction {
   const ExtendedModel& ext_;
   const std::vector<int>& rows_;
   Eigen::VectorXd inv_sigma_;
+  std::vector<int> free_;
+  Eigen::VectorXd base_;
 };
 
 // Refits every effect parameter of `ext` on `rows` (Ceres, Jets); returns the
 // model with fitted values and standard errors (covariance inflated by
-// `inflation` for correlated noise).
+// `inflation` for correlated noise). More than kDiagJetSize parameters are
+// refitted by blocks of whole effects (two sweeps, the others held fixed).
 ExtendedModel RefitEffects(const Context& ctx, const ExtendedModel& ext,
                            const std::vector<int>& rows, const Eigen::VectorXd& inv_sigma,
                            double inflation) {
   Eigen::VectorXd theta = ext.EffectParams();
   const int p = static_cast<int>(theta.size());
   if (p == 0) return ext;
-  DIFFDYN_CHECK(p <= kDiagJetSize, "refit of ", p, " effect parameters exceeds ", kDiagJetSize);
-  auto* cost = new RefitCost(ctx, ext, rows, inv_sigma);
-  ceres::Problem problem;
-  problem.AddResidualBlock(cost, nullptr, theta.data());
-  // Physical bounds: positive gain, v_s and armature-free scales.
+  // Blocks of whole effects with at most kDiagJetSize parameters each.
+  std::vector<std::vector<int>> blocks(1);
   for (int i = 0; i < static_cast<int>(ext.effects().size()); ++i) {
-    const Effect& e = ext.effects()[i];
-    const int o = ext.ParamOffset(i);
-    if (e.kind == EffectKind::kGain) problem.SetParameterLowerBound(theta.data(), o, 1e-3);
-    if (e.kind == EffectKind::kStribeck) {
-      problem.SetParameterLowerBound(theta.data(), o + 2, 1e-3);
+    const int o = ext.ParamOffset(i), count = static_cast<int>(ext.effects()[i].params.size());
+    if (static_cast<int>(blocks.back().size()) + count > kDiagJetSize) blocks.emplace_back();
+    for (int k = 0; k < count; ++k) blocks.back().push_back(o + k);
+  }
+  Eigen::VectorXd stderrs = Eigen::VectorXd::Zero(p);
+  const int sweeps = blocks.size() > 1 ? 2 : 1;
+  for (int sweep = 0; sweep < sweeps; ++sweep) {
+    for (const std::vector<int>& free : blocks) {
+      Eigen::VectorXd x(free.size());
+      for (std::size_t i = 0; i < free.size(); ++i) x[i] = theta[free[i]];
+      auto* cost = new RefitCost(ctx, ext, rows, inv_sigma, free, theta);
+      ceres::Problem problem;
+      problem.AddResidualBlock(cost, nullptr, x.data());
+      // Physical bounds: a positive gain and Stribeck velocity.
+      for (int e = 0; e < static_cast<int>(ext.effects().size()); ++e) {
+        const Effect& effect = ext.effects()[e];
+        int bounded = -1;
+        if (effect.kind == EffectKind::kGain) bounded = ext.ParamOffset(e);
+        if (effect.kind == EffectKind::kStribeck) bounded = ext.ParamOffset(e) + 2;
+        const auto it = std::find(free.begin(), free.end(), bounded);
+        if (bounded >= 0 && it != free.end()) {
+          problem.SetParameterLowerBound(x.data(), static_cast<int>(it - free.begin()), 1e-3);
+        }
+      }
+      ceres::Solver::Options options;
+      options.max_num_iterations = 50;
+      options.linear_solver_type = ceres::DENSE_QR;
+      options.logging_type = ceres::SILENT;
+      ceres::Solver::Summary summary;
+      ceres::Solve(options, &problem, &summary);
+      if (!x.allFinite()) throw NumericalError("diagnose: refit produced non-finite parameters");
+      for (std::size_t i = 0; i < free.size(); ++i) theta[free[i]] = x[i];
+      // Covariance from the Jacobian at the solution: s^2 (J^T J)^{-1} * inflation.
+      RefitCost at(ctx, ext, rows, inv_sigma, free, theta);
+      const int m = at.num_residuals(), k = static_cast<int>(free.size());
+      Eigen::VectorXd residuals(m);
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> jac(m, k);
+      const double* params[] = {x.data()};
+      double* jacs[] = {jac.data()};
+      at.Evaluate(params, residuals.data(), jacs);
+      const double s2 = residuals.squaredNorm() / std::max(1, m - k);
+      const Eigen::MatrixXd cov =
+          Eigen::MatrixXd(jac.transpose() * jac).completeOrthogonalDecomposition().pseudoInverse() *
+          s2 * inflation;
+      for (int i = 0; i < k; ++i) stderrs[free[i]] = std::sqrt(std::max(0.0, cov(i, i)));
     }
   }
-  ceres::Solver::Options options;
-  options.max_num_iterations = 50;
-  options.linear_solver_type = ceres::DENSE_QR;
-  options.logging_type = ceres::SILENT;
-  ceres::Solver::Summary summary;
-  ceres::Solve(options, &problem, &summary);
-  if (!theta.allFinite()) throw NumericalError("diagnose: refit produced non-finite parameters");
-  // Covariance from the Jacobian at the solution: s^2 (J^T J)^{-1} * inflation.
-  const int m = cost->num_residuals();
-  Eigen::VectorXd residuals(m);
-  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> jac(m, p);
-  const double* params[] = {theta.data()};
-  double* jacs[] = {jac.data()};
-  cost->Evaluate(params, residuals.data(), jacs);
-  const double s2 = residuals.squaredNorm() / std::max(1, m - p);
-  const Eigen::MatrixXd jtj = jac.transpose() * jac;
-  const Eigen::MatrixXd cov =
-      jtj.completeOrthogonalDecomposition().pseudoInverse() * s2 * inflation;
-  return ext.WithEffectParams(theta, cov.diagonal().cwiseMax(0.0).cwiseSqrt());
+  return ext.WithEffectParams(theta, stderrs);
 }
 
 // ---------- the linear stage: candidates, Gram matrices, stepwise EBIC ----------
@@ -340,16 +357,24 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
         const VectorX<DiagJet> p = params_of_(xj);
         for (int r = 0; r < count_; ++r) {
           const int k = ctx_.sd.rows[r];
-          const VectorX<DiagJet> tau = ctx_.model->InverseDynamics(
-              VectorX<DiagJet>(ctx_.sd.q.col(k).cast<DiagJet>()),
-              VectorX<DiagJet>(ctx_.sd.qd.col(k).cast<DiagJet>()),
-              VectorX<DiagJet>(ctx_.sd.qdd.col(k).cast<DiagJet>()), p);
+          const VectorX<DiagJet> q = ctx_.sd.q.col(k).cast<DiagJet>();
+          const VectorX<DiagJet> qd = ctx_.sd.qd.col(k).cast<DiagJet>();
+          const VectorX<DiagJet> qdd = ctx_.sd.qdd.col(k).cast<DiagJet>();
+          const VectorX<DiagJet> tau = ctx_.model->InverseDynamics(q, qd, qdd, p);
+          // Residuals divided by the diagonal of M(q; p): acceleration units,
+          // so shrinking the whole model (free motion, tau = 0) cannot fit.
+          const VectorX<DiagJet> zero = VectorX<DiagJet>::Zero(ctx_.n);
+          const VectorX<DiagJet> bias = ctx_.model->InverseDynamics(q, zero, zero, p);
           for (int j = 0; j < ctx_.n; ++j) {
+            VectorX<DiagJet> unit = zero;
+            unit[j] = DiagJet(1.0);
+            const DiagJet mjj = ctx_.model->InverseDynamics(q, zero, unit, p)[j] - bias[j];
+            const DiagJet res = (DiagJet(ctx_.tau(j, r)) - tau[j]) / mjj;
             const int row = r * ctx_.n + j;
-            residuals[row] = ctx_.tau(j, r) - tau[j].a;
+            residuals[row] = res.a;
             if (!std::isfinite(residuals[row])) return false;
             if (jacobians && jacobians[0]) {
-              for (int c = 0; c < free_; ++c) jacobians[0][row * free_ + c] = -tau[j].v[c];
+              for (int c = 0; c < free_; ++c) jacobians[0][row * free_ + c] = res.v[c];
             }
           }
         }
@@ -854,7 +879,7 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
     const double delay = extended.Delay<double>(theta);
     Eigen::VectorXd sq_q_nom = Eigen::VectorXd::Zero(n), sq_q_ext = sq_q_nom, sq_v_nom = sq_q_nom,
                     sq_v_ext = sq_q_nom;
-    int windows = 0;
+    int windows = 0, failed = 0;
     double next_start = -1e300;
     for (int r : ctx.heldout) {
       const int k0 = sd.rows[r];
@@ -895,8 +920,24 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
       };
       Eigen::VectorXd q_end, v_end, unused;
       sd.StateAt<double>(t0 + options.rollout_horizon, seg, q_end, v_end, unused);
-      const auto [qn, vn] = roll(nominal_ext, 0.0);
-      const auto [qe, ve] = roll(extended, delay);
+      Eigen::VectorXd qn, vn;
+      try {
+        std::tie(qn, vn) = roll(nominal_ext, 0.0);
+      } catch (const NumericalError&) {
+        ++failed;
+        qn = Eigen::VectorXd::Constant(n, kNaN);
+        vn = qn;
+      }
+      // An extended mass matrix that is not positive definite (e.g. a negative
+      // armature) makes the extended rollout meaningless: counted, reported NaN.
+      Eigen::VectorXd qe, ve;
+      try {
+        std::tie(qe, ve) = roll(extended, delay);
+      } catch (const NumericalError&) {
+        ++failed;
+        qe = Eigen::VectorXd::Constant(n, kNaN);
+        ve = qe;
+      }
       sq_q_nom += (qn - q_end).array().square().matrix();
       sq_v_nom += (vn - v_end).array().square().matrix();
       sq_q_ext += (qe - q_end).array().square().matrix();
@@ -909,7 +950,10 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
     result.rollout_qd_nominal = (sq_v_nom / wn).cwiseSqrt();
     result.rollout_qd_extended = (sq_v_ext / wn).cwiseSqrt();
     result.notes.push_back(StrCat("rollouts: ", windows, " held-out windows of ", options.rollout_horizon,
-                                  " s from the measured state, RK4, measured torque as input"));
+                                  " s from the measured state, RK4, measured torque as input",
+                                  failed > 0 ? StrCat("; a mass matrix was not positive "
+                                                      "definite in ", failed, " rollouts (NaN)")
+                                             : std::string()));
   }
 
   // ---- energy balance over windows: the integral of qd . (tau - tau_hat) ----
