@@ -48,7 +48,9 @@ enum class ActivationKind { kLinear, kRelu, kSoftplus, kTanh, kSigmoid, kElu, kC
 /// An activation g with its parameter p (softplus beta, elu alpha, cos frequency;
 /// ignored by the others). Plain value type.
 struct Activation {
+  /// Which g.
   ActivationKind kind = ActivationKind::kLinear;
+  /// p: softplus beta, elu alpha or cos frequency omega (others ignore it).
   double param = 1.0;
 
   /// g(a) = a.
@@ -66,6 +68,7 @@ struct Activation {
   /// g(a) = cos(omega a).
   static Activation Cos(double omega = 1.0) { return {ActivationKind::kCos, omega}; }
 
+  /// Same kind and parameter.
   bool operator==(const Activation&) const = default;
 };
 

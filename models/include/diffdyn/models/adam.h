@@ -25,11 +25,17 @@ namespace diffdyn {
 
 /// Hyper-parameters of Adam (PyTorch's defaults).
 struct AdamOptions {
+  /// lr > 0.
   double learning_rate = 1e-3;
+  /// beta1 in [0, 1): decay of the first moment m.
   double beta1 = 0.9;
+  /// beta2 in [0, 1): decay of the second moment v.
   double beta2 = 0.999;
+  /// eps > 0 added to the denominator.
   double epsilon = 1e-8;
+  /// lambda >= 0 (L2 penalty, or AdamW decay when decoupled).
   double weight_decay = 0.0;
+  /// AMSGrad: use the running maximum of v.
   bool amsgrad = false;
   /// AdamW: decay theta directly instead of adding lambda theta to g.
   bool decoupled_weight_decay = false;
@@ -77,6 +83,7 @@ class Adam {
 
   /// Number of steps taken.
   long steps() const { return step_; }
+  /// The hyper-parameters.
   const AdamOptions& options() const { return options_; }
 
  private:

@@ -39,9 +39,13 @@ enum class InitScheme { kTorchDefault, kXavierUniform, kXavierNormal, kKaimingUn
 
 /// Scheme, gains and constant bias (bias unused by kTorchDefault).
 struct InitOptions {
+  /// Distribution of the weights.
   InitScheme scheme = InitScheme::kTorchDefault;
+  /// Gain of the hidden layers' weights (xavier / kaiming).
   double hidden_gain = 1.0;
+  /// Gain of the output layer's weights (xavier / kaiming).
   double output_gain = 1.0;
+  /// Constant bias (all schemes except torch-default).
   double bias = 0.0;
 
   /// The DDN authors' default: xavier-normal, gains sqrt(2) / 1, bias 0.1.

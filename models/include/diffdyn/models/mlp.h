@@ -59,7 +59,9 @@ namespace diffdyn {
 /// Layer sizes [n_0 = inputs, n_1, ..., n_L = outputs] and one activation per
 /// hidden layer (L - 1 of them); the output layer is linear.
 struct MlpArchitecture {
+  /// [n_0, n_1, ..., n_L], all positive.
   std::vector<int> sizes;
+  /// g_0 .. g_{L-2} of the hidden layers.
   std::vector<Activation> activations;
 
   /// Number of affine layers L = sizes.size() - 1.
@@ -99,6 +101,7 @@ struct MlpArchitecture {
     }
   }
 
+  /// Same sizes and activations.
   bool operator==(const MlpArchitecture&) const = default;
 };
 
@@ -112,6 +115,7 @@ class MlpWorkspace {
   /// Default chunk size: 256 samples per chunk (a batch of 500 = 2 chunks).
   static constexpr int kDefaultChunkSize = 256;
 
+  /// Empty workspace; the first Forward sizes it.
   MlpWorkspace() = default;
   /// Workspace for `arch` and batches up to `max_batch` samples, cut into
   /// chunks of `chunk_size` samples; `jacobian` reserves the Jacobian chain.
@@ -210,12 +214,15 @@ class MlpWorkspace {
 template <typename T>
 class Mlp {
  public:
+  /// Scalar type of the parameters.
   using Scalar = T;
+  /// Vector of T (the flat parameters theta).
   using VectorT = Eigen::Matrix<T, Eigen::Dynamic, 1>;
   /// Scalar of T * S (a Jet if either is a Jet).
   template <typename S>
   using ResultScalar = decltype(std::declval<T>() * std::declval<S>());
 
+  /// Empty network (no layers); assign a real one before use.
   Mlp() = default;
   /// Network with all parameters zero.
   explicit Mlp(MlpArchitecture arch) : arch_(std::move(arch)) {
@@ -229,9 +236,13 @@ class Mlp {
                   arch_.num_parameters(), " parameters, got ", params_.size());
   }
 
+  /// Layer sizes and activations.
   const MlpArchitecture& architecture() const { return arch_; }
+  /// n_0.
   int num_inputs() const { return arch_.num_inputs(); }
+  /// n_L.
   int num_outputs() const { return arch_.num_outputs(); }
+  /// Size of theta: sum_l n_{l+1} (n_l + 1).
   Eigen::Index num_parameters() const { return params_.size(); }
   /// The flat parameters theta.
   const VectorT& parameters() const { return params_; }

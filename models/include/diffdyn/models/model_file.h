@@ -56,10 +56,15 @@ inline constexpr int kModelFileVersion = 1;
 
 /// The contents of a model file (see model_file.h for the JSON layout).
 struct ModelFile {
+  /// "mlp", "abs-nn", "res-node", ... (must be registered).
   std::string kind;
+  /// Kind-specific architecture object.
   nlohmann::json architecture = nlohmann::json::object();
+  /// The flat parameter vector theta (all finite).
   Eigen::VectorXd parameters;
+  /// Where the model came from (data, seed, command, ...).
   nlohmann::json provenance = nlohmann::json::object();
+  /// Measured errors and losses.
   nlohmann::json metrics = nlohmann::json::object();
 };
 

@@ -44,6 +44,7 @@
 #include <filesystem>
 #include <memory>
 #include <mutex>
+#include <numeric>
 #include <string>
 #include <utility>
 #include <vector>
@@ -141,11 +142,43 @@ struct PushingModelConfig {
   }
 };
 
+/// The MLP forward passes of one taped solve, kept so that the backward pass need not
+/// recompute them: entry k holds the input z and the MLP workspace (activations) of
+/// the k-th Eval since Start. At most 64 entries and `budget_bytes` of workspaces (an
+/// MLP workspace of B samples holds about 8 B (3 sum_l n_l + 2 w max(n_0, n_L)) bytes,
+/// w the widest layer: ~4 MB for h = 100, B = 250); later Evals are not kept and their
+/// Vjps recompute.
+struct MlpForwardCache {
+  std::vector<Eigen::MatrixXd> inputs;
+  std::vector<MlpWorkspace> workspaces;
+  int count = 0;
+  bool recording = false;
+  double budget_bytes = 192e6;
+
+  /// Entries that fit the budget for batches of `batch` samples of `arch`.
+  int Capacity(const MlpArchitecture& arch, int batch) const {
+    const double sum = std::accumulate(arch.sizes.begin(), arch.sizes.end(), 0.0);
+    const double bytes =
+        8.0 * batch * (3 * sum + 2.0 * arch.max_width() * std::max(arch.num_inputs(), arch.num_outputs()));
+    return static_cast<int>(std::min(64.0, budget_bytes / std::max(bytes, 1.0)));
+  }
+
+  /// Forgets all entries; records the following Evals if `record`.
+  void Start(bool record) {
+    count = 0;
+    recording = record;
+  }
+};
+
 /// dz/dt = M(z) for a batch (n = 6 rows, one sample per column): the NeuralODE's
 /// vector field as a BatchedVjpSystem (adjoint.h). `net` points at the model's MLP
-/// and is re-pointed before every use (the model may have moved).
+/// and is re-pointed before every use (the model may have moved). With a `cache`,
+/// Evals of a taped solve keep their activations and the Vjp at the same stage input
+/// (the solver's backward pass visits stages in reverse order) reuses them instead of
+/// a second forward pass; a Vjp at an input not near the top of the cache recomputes.
 struct MlpOdeSystem {
   const Mlp<double>* net = nullptr;
+  MlpForwardCache* cache = nullptr;
 
   /// Buffers for one batch: the MLP's workspace plus input / output / gradient copies.
   struct Workspace {
@@ -167,20 +200,48 @@ struct MlpOdeSystem {
   /// dzdt = M(z), z and dzdt 6 x B.
   void Eval(const Eigen::Ref<const Eigen::MatrixXd>& z, double, Eigen::Ref<Eigen::MatrixXd> dzdt,
             Workspace& ws) const {
-    ws.input = z;
-    net->Forward(ws.input, &ws.output, nullptr, &ws.mlp);
+    if (cache && cache->recording &&
+        cache->count < cache->Capacity(net->architecture(), static_cast<int>(z.cols()))) {
+      // Keep this forward pass for the backward one.
+      const int k = cache->count++;
+      if (static_cast<int>(cache->inputs.size()) <= k) {
+        cache->inputs.emplace_back();
+        cache->workspaces.emplace_back(net->architecture(), static_cast<int>(z.cols()),
+                                       std::max(static_cast<int>(z.cols()), 1), false);
+      }
+      cache->inputs[k] = z;
+      net->Forward(cache->inputs[k], &ws.output, nullptr, &cache->workspaces[k]);
+    } else {
+      ws.input = z;
+      net->Forward(ws.input, &ws.output, nullptr, &ws.mlp);
+    }
     dzdt = ws.output;
   }
   /// vjp_z = (dM/dz)^T lambda per column (6 x B); grad_theta += sum_b (dM/dtheta)^T lambda_b.
-  /// Recomputes the forward pass at z (the solver's tape holds only stage inputs).
+  /// Reuses a cached forward pass at exactly this z (searching down from the most recent
+  /// entry and dropping the ones above it: rejected or unneeded stages), else recomputes.
   void Vjp(const Eigen::Ref<const Eigen::MatrixXd>& z, double,
            const Eigen::Ref<const Eigen::MatrixXd>& lambda, Eigen::Ref<Eigen::MatrixXd> vjp_z,
            Eigen::Ref<Eigen::VectorXd> grad_theta, Workspace& ws) const {
     static const Eigen::MatrixXd kNone;
-    ws.input = z;
-    net->Forward(ws.input, &ws.output, nullptr, &ws.mlp);
+    constexpr int kSearch = 8;
+    MlpWorkspace* forward = nullptr;
+    if (cache) {
+      for (int k = cache->count - 1; k >= std::max(0, cache->count - kSearch); --k) {
+        if (cache->inputs[k].cols() == z.cols() && cache->inputs[k] == z) {
+          forward = &cache->workspaces[k];
+          cache->count = k;
+          break;
+        }
+      }
+    }
+    if (forward == nullptr) {
+      ws.input = z;
+      net->Forward(ws.input, &ws.output, nullptr, &ws.mlp);
+      forward = &ws.mlp;
+    }
     ws.cotangent = lambda;
-    net->Backward(ws.cotangent, kNone, &ws.grad_params, &ws.grad_input, &ws.mlp);
+    net->Backward(ws.cotangent, kNone, &ws.grad_params, &ws.grad_input, forward);
     vjp_z = ws.grad_input;
     grad_theta += ws.grad_params;
   }
@@ -237,6 +298,7 @@ class PushingWorkspace : public TransitionWorkspace {
   // NN: the MLP's tape; NODE: the solver (which references `system`) and its tape.
   MlpWorkspace mlp;
   MlpOdeSystem system;
+  MlpForwardCache cache;
   std::unique_ptr<BatchedOdeSolver<MlpOdeSystem>> solver;
   Eigen::MatrixXd input, output, cotangent, grad_input;
   Eigen::VectorXd grad_params;
@@ -317,6 +379,7 @@ class PushingModel final : public TransitionModel {
     if (IsNeuralOde(config_.type)) {
       // Adjoint seed dL/dz(1) = [gbar; 0]; dL/dx_t = top rows of dL/dz(0).
       ws.system.net = &net_;
+      ws.system.cache = &ws.cache;
       Eigen::MatrixXd& seed = ws.dl_dz[1];
       seed.topRows(3) = dl_dnext;
       seed.bottomRows(3).setZero();
@@ -351,6 +414,7 @@ class PushingModel final : public TransitionModel {
   // Sizes the workspace buffers for a batch of b (allocates only when b changes).
   void Prepare(int b, PushingWorkspace& ws) const {
     ws.system.net = &net_;
+    ws.system.cache = &ws.cache;
     if (IsNeuralOde(config_.type)) {
       if (!ws.solver) {
         ws.solver = std::make_unique<BatchedOdeSolver<MlpOdeSystem>>(ws.system, config_.ode_options());
@@ -373,7 +437,9 @@ class PushingModel final : public TransitionModel {
     ws.input.topRows(3) = states;
     ws.input.bottomRows(3) = actions;
     if (IsNeuralOde(config_.type)) {
+      ws.cache.Start(tape);
       ws.solver->Forward(ws.input, ws.times, &ws.outputs, tape);
+      ws.cache.recording = false;
       next = ws.outputs[1].topRows(3);
     } else {
       net_.Forward(ws.input, &ws.output, nullptr, &ws.mlp);
