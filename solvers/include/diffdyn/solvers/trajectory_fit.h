@@ -45,7 +45,8 @@
 
 #include <Eigen/Core>
 #include <ceres/dynamic_autodiff_cost_function.h>
-#include <ceres/covariance.h>
+#include <Eigen/SVD>
+#include <ceres/crs_matrix.h>
 #include <ceres/problem.h>
 #include <ceres/solver.h>
 
@@ -235,21 +236,29 @@ TrajectoryFitResult FitTrajectoryParameters(const Model& model,
   result.converged = summary.termination_type == ceres::CONVERGENCE;
   result.summary = summary.BriefReport();
 
-  // Cov = sigma^2 (J^T J)^-1, sigma^2 from the residuals at the optimum.
-  ceres::Covariance::Options covariance_options;
-  covariance_options.algorithm_type = ceres::DENSE_SVD;
-  ceres::Covariance covariance(covariance_options);
-  std::vector<std::pair<const double*, const double*>> blocks = {{theta.data(), theta.data()}};
-  if (!covariance.Compute(blocks, problem.get())) {
-    throw NumericalError("FitTrajectoryParameters: the parameters are not identifiable from "
-                         "the data (singular J^T J)");
+  // Cov = sigma^2 (J^T J)^-1 over theta and the x0_k, from the SVD J = U S V^T:
+  // (J^T J)^-1 = V S^-2 V^T. Its theta block is the marginal covariance.
+  ceres::CRSMatrix crs;
+  double final_cost = 0;
+  problem->Evaluate(ceres::Problem::EvaluateOptions(), &final_cost, nullptr, nullptr, &crs);
+  Eigen::MatrixXd jacobian = Eigen::MatrixXd::Zero(crs.num_rows, crs.num_cols);
+  for (int r = 0; r < crs.num_rows; ++r) {
+    for (int i = crs.rows[r]; i < crs.rows[r + 1]; ++i) jacobian(r, crs.cols[i]) = crs.values[i];
   }
-  Eigen::Matrix<double, kNumParams, kNumParams, Eigen::RowMajor> jtj_inverse;
-  covariance.GetCovarianceBlock(theta.data(), theta.data(), jtj_inverse.data());
-  const int num_unknowns =
-      kNumParams + (options.fit_initial_state ? n * static_cast<int>(data.size()) : 0);
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(jacobian, Eigen::ComputeThinV);
+  const Eigen::VectorXd& singular = svd.singularValues();
+  if (singular.size() == 0 || !(singular.minCoeff() > 1e-10 * singular.maxCoeff())) {
+    throw NumericalError(StrCat("FitTrajectoryParameters: the parameters are not identifiable "
+                                "from the data (J has condition number ",
+                                singular.maxCoeff() / singular.minCoeff(), ")"));
+  }
+  // theta is the first parameter block of every residual block: columns 0..p-1.
+  const Eigen::MatrixXd v_theta = svd.matrixV().topRows(kNumParams);
+  const Eigen::MatrixXd jtj_inverse =
+      v_theta * singular.array().square().inverse().matrix().asDiagonal() * v_theta.transpose();
+  const int num_unknowns = static_cast<int>(jacobian.cols());
   const double dof = std::max(1, num_residuals - num_unknowns);
-  const double sigma2 = 2 * summary.final_cost / dof;
+  const double sigma2 = 2 * final_cost / dof;
   result.covariance = sigma2 * jtj_inverse;
   result.standard_errors = result.covariance.diagonal().cwiseSqrt();
   return result;

@@ -1,0 +1,113 @@
+// MPPI: model predictive path integral control over any TransitionModel.
+//
+// MPPI keeps a nominal action sequence U = (u_0, ..., u_{T-1}) (m each) and, at
+// every command, samples K perturbed sequences, rolls each through the model
+// x_{t+1} = F(x_t, u_t) from the current state, and averages the perturbations
+// weighted by the exponentiated negative cost:
+//
+//   1. warm start: U <- (u_1, ..., u_{T-1}, 0)
+//   2. eps_{k,t} ~ N(0, Sigma);  v_{k,t} = clamp(u_t + eps_{k,t}, u_min, u_max);
+//      eps_{k,t} <- v_{k,t} - u_t            (the perturbation after clamping)
+//   3. S_k = sum_{t=1..T} c(x_{k,t}) + sum_t u_t^T lambda Sigma^-1 eps_{k,t}
+//      (running cost over the predicted states x_1..x_T, no terminal cost, plus
+//       the perturbation cost)
+//   4. w_k = exp(-(S_k - min_j S_j) / lambda) / sum_j exp(-(S_j - min S) / lambda)
+//   5. u_t <- u_t + sum_k w_k eps_{k,t};  execute u_0.
+//
+// This is the algorithm of pytorch_mppi as the NeuralODE-Panda seed used it
+// (Sigma = 0.5 I is a covariance, lambda = 0.01, K = 1000, T = 20 for the
+// obstacle task).
+//
+// Rollouts use the model's batched double path. Samples are cut into fixed
+// chunks; chunk c draws its noise from its own generator seeded by (seed,
+// command index, c), so the result is identical at any thread count, and the
+// chunks run on all cores with one model workspace each. Every buffer is sized
+// once at construction: a command allocates nothing.
+//
+//   diffdyn::Mppi mppi(model, cost, diffdyn::MppiOptions{}, /*seed=*/1);
+//   Eigen::VectorXd u = mppi.Command(x);   // x: n, u: m
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/transition_model.h"
+
+namespace diffdyn {
+
+/// A running cost evaluated on a batch of predicted states.
+class MppiCost {
+ public:
+  virtual ~MppiCost() = default;
+  /// costs(b) += c(states(:, b)) for every column b; states: n x B, costs: B.
+  virtual void Accumulate(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                          Eigen::Ref<Eigen::VectorXd> costs) const = 0;
+};
+
+/// Settings of Mppi. Empty bounds are taken as unbounded.
+struct MppiOptions {
+  int samples = 1000;            ///< K
+  int horizon = 20;              ///< T
+  double lambda = 0.01;          ///< temperature
+  double noise_variance = 0.5;   ///< Sigma = noise_variance I (m x m) unless `noise_covariance` is set
+  Eigen::MatrixXd noise_covariance;  ///< Sigma (m x m), symmetric positive definite; empty = above
+  Eigen::VectorXd u_min;         ///< lower action bounds (m) or empty
+  Eigen::VectorXd u_max;         ///< upper action bounds (m) or empty
+  int threads = 0;               ///< <= 0: all cores
+  int chunk_size = 125;          ///< samples per chunk (fixes the random streams)
+};
+
+/// The MPPI controller (see the file comment). Not thread-safe itself; it uses
+/// several threads inside Command.
+class Mppi {
+ public:
+  /// Keeps references to `model` and `cost`, which must outlive the controller.
+  /// Throws diffdyn::Error for inconsistent options (sizes, a non-positive-definite Sigma).
+  Mppi(const TransitionModel& model, const MppiCost& cost, MppiOptions options,
+       std::uint64_t seed);
+  ~Mppi();
+
+  /// One MPPI iteration from state x (n); returns the action to execute, u_0 (m).
+  Eigen::VectorXd Command(const Eigen::Ref<const Eigen::VectorXd>& x);
+
+  /// Draws a fresh nominal sequence U ~ N(0, Sigma), clamped (as at construction).
+  void Reset();
+
+  /// The nominal sequence U (m x T) after the last command.
+  const Eigen::MatrixXd& nominal() const { return nominal_; }
+
+  /// Total costs S_k of the last command's samples (K).
+  const Eigen::VectorXd& sample_costs() const { return costs_; }
+
+  /// The predicted state path of the updated nominal sequence from the last
+  /// command's state (n x (T + 1)), for pictures.
+  Eigen::MatrixXd PredictNominal(const Eigen::Ref<const Eigen::VectorXd>& x) const;
+
+ private:
+  void RolloutChunk(int chunk, int begin, int end, const Eigen::VectorXd& x);
+  void Clamp(Eigen::Ref<Eigen::MatrixXd> actions) const;
+
+  const TransitionModel& model_;
+  const MppiCost& cost_;
+  MppiOptions options_;
+  std::uint64_t seed_;
+  std::uint64_t commands_ = 0;
+  int n_, m_;
+  Eigen::MatrixXd chol_;           // L with Sigma = L L^T (m x m)
+  Eigen::MatrixXd lambda_sigma_inv_;  // lambda Sigma^-1 (m x m)
+  Eigen::MatrixXd nominal_;        // U, m x T
+  Eigen::MatrixXd weighted_nominal_;  // lambda Sigma^-1 U, m x T
+  Eigen::VectorXd state_;          // x of the current command, n
+  std::vector<Eigen::MatrixXd> noise_;  // eps_t, m x K each (T of them)
+  Eigen::VectorXd costs_;          // S, K
+  Eigen::VectorXd weights_;        // w, K
+  Rng reset_rng_;
+  struct ChunkScratch;
+  std::vector<std::unique_ptr<ChunkScratch>> scratch_;  // one per chunk
+};
+
+}  // namespace diffdyn

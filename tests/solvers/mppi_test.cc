@@ -1,0 +1,175 @@
+// MPPI over any TransitionModel, and the pushing cost's overlap test.
+#include "diffdyn/solvers/mppi.h"
+
+#include <cmath>
+#include <numbers>
+
+#include <gtest/gtest.h>
+
+#include "diffdyn/solvers/pushing_cost.h"
+
+namespace diffdyn {
+namespace {
+
+// A planar point that moves by its (bounded) action: x_{t+1} = x_t + 0.1 u_t.
+class PointModel : public TransitionModel {
+ public:
+  int state_size() const override { return 2; }
+  int action_size() const override { return 2; }
+  std::string kind() const override { return "point"; }
+  std::unique_ptr<TransitionWorkspace> MakeWorkspace(int) const override {
+    return std::make_unique<TransitionWorkspace>();
+  }
+  void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                    const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                    Eigen::Ref<Eigen::MatrixXd> next, TransitionWorkspace&) const override {
+    CheckBatchSizes(states, actions, next);
+    next = states + 0.1 * actions;
+  }
+};
+
+// Squared distance to a goal, plus a wall x = 0.5 the point must go around for |y| < 0.4.
+class GoalCost : public MppiCost {
+ public:
+  explicit GoalCost(bool wall) : wall_(wall) {}
+  void Accumulate(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                  Eigen::Ref<Eigen::VectorXd> costs) const override {
+    for (Eigen::Index b = 0; b < states.cols(); ++b) {
+      costs[b] += (states.col(b) - Eigen::Vector2d(1.0, 0.0)).squaredNorm();
+      if (wall_ && std::abs(states(0, b) - 0.5) < 0.05 && std::abs(states(1, b)) < 0.4) {
+        costs[b] += 100;
+      }
+    }
+  }
+
+ private:
+  bool wall_;
+};
+
+MppiOptions PointOptions() {
+  MppiOptions o;
+  o.samples = 400;
+  o.horizon = 15;
+  o.lambda = 0.05;
+  o.noise_variance = 0.3;
+  o.u_min = Eigen::VectorXd::Constant(2, -1.0);
+  o.u_max = Eigen::VectorXd::Constant(2, 1.0);
+  o.chunk_size = 64;
+  return o;
+}
+
+// Runs the closed loop on the true point dynamics; returns the final state and
+// whether the wall was ever entered.
+std::pair<Eigen::Vector2d, bool> ClosedLoop(bool wall, int threads, std::uint64_t seed) {
+  PointModel model;
+  GoalCost cost(wall);
+  MppiOptions o = PointOptions();
+  o.threads = threads;
+  Mppi mppi(model, cost, o, seed);
+  Eigen::Vector2d x(0.0, 0.0);
+  bool hit = false;
+  for (int step = 0; step < 60; ++step) {
+    const Eigen::VectorXd u = mppi.Command(x);
+    EXPECT_TRUE((u.array() >= -1 - 1e-12).all() && (u.array() <= 1 + 1e-12).all()) << u;
+    x += 0.1 * u;
+    hit = hit || (wall && std::abs(x.x() - 0.5) < 0.05 && std::abs(x.y()) < 0.4);
+  }
+  return {x, hit};
+}
+
+TEST(Mppi, AnalyticToyModelReachesItsGoal) {
+  const auto [x, hit] = ClosedLoop(false, 2, 3);
+  EXPECT_LT((x - Eigen::Vector2d(1.0, 0.0)).norm(), 0.05) << x.transpose();
+}
+
+TEST(Mppi, GoesAroundAWall) {
+  const auto [x, hit] = ClosedLoop(true, 2, 5);
+  EXPECT_FALSE(hit);
+  EXPECT_LT((x - Eigen::Vector2d(1.0, 0.0)).norm(), 0.1) << x.transpose();
+}
+
+TEST(Mppi, SameSeedSameCommandsAtAnyThreadCount) {
+  PointModel model;
+  GoalCost cost(true);
+  Mppi a(model, cost, [] { auto o = PointOptions(); o.threads = 1; return o; }(), 9);
+  Mppi b(model, cost, [] { auto o = PointOptions(); o.threads = 3; return o; }(), 9);
+  Mppi c(model, cost, [] { auto o = PointOptions(); o.threads = 1; return o; }(), 10);
+  const Eigen::Vector2d x(0.1, -0.2);
+  for (int i = 0; i < 5; ++i) {
+    const Eigen::VectorXd ua = a.Command(x), ub = b.Command(x), uc = c.Command(x);
+    EXPECT_EQ(ua, ub);
+    EXPECT_NE(ua, uc);
+  }
+}
+
+TEST(Mppi, WeightsFavourLowCostSamples) {
+  // With a tiny temperature the update follows the single best sample.
+  PointModel model;
+  GoalCost cost(false);
+  MppiOptions o = PointOptions();
+  o.lambda = 1e-6;
+  Mppi mppi(model, cost, o, 1);
+  const Eigen::VectorXd u = mppi.Command(Eigen::Vector2d(0, 0));
+  EXPECT_GT(u.x(), 0.5);  // toward the goal at (1, 0)
+  EXPECT_EQ(mppi.sample_costs().size(), o.samples);
+  const Eigen::MatrixXd path = mppi.PredictNominal(Eigen::Vector2d(0, 0));
+  EXPECT_EQ(path.cols(), o.horizon + 1);
+  EXPECT_GT(path(0, o.horizon), path(0, 0));
+}
+
+TEST(Mppi, BadOptionsAreNamed) {
+  PointModel model;
+  GoalCost cost(false);
+  MppiOptions o = PointOptions();
+  o.u_min = Eigen::VectorXd::Zero(3);
+  EXPECT_THROW(Mppi(model, cost, o, 1), Error);
+  o = PointOptions();
+  o.noise_covariance.resize(2, 2);
+  o.noise_covariance << 1, 2, 2, 1;  // indefinite
+  EXPECT_THROW(Mppi(model, cost, o, 1), Error);
+  o = PointOptions();
+  o.lambda = 0;
+  EXPECT_THROW(Mppi(model, cost, o, 1), Error);
+  Mppi mppi(model, cost, PointOptions(), 1);
+  EXPECT_THROW(mppi.Command(Eigen::VectorXd::Zero(3)), Error);
+}
+
+TEST(RectanglesOverlap, SeparatingAxisCases) {
+  const Rectangle obstacle = PushingCost::Obstacle();  // x in [0.55, 0.65], y in [-0.05, 0.45]
+  const Eigen::Vector2d h(0.05, 0.05);
+  EXPECT_TRUE(RectanglesOverlap({{0.6, 0.2}, h, 0.3}, obstacle));
+  EXPECT_FALSE(RectanglesOverlap({{0.4, 0.0}, h, 0.0}, obstacle));
+  // Touching faces count as apart, a hair closer overlaps (exactly representable numbers).
+  const Rectangle wall{{0.625, 0.25}, {0.0625, 0.25}, 0.0};
+  const Eigen::Vector2d g(0.0625, 0.0625);
+  EXPECT_FALSE(RectanglesOverlap({{0.5, 0.25}, g, 0.0}, wall));
+  EXPECT_TRUE(RectanglesOverlap({{0.5 + 1e-9, 0.25}, g, 0.0}, wall));
+  EXPECT_TRUE(RectanglesOverlap({{0.52, 0.2}, h, 0.0}, obstacle));
+  // A square rotated by 45 degrees reaches 0.0707 from its centre along x.
+  const double q = std::numbers::pi / 4;
+  EXPECT_TRUE(RectanglesOverlap({{0.55 - 0.07, 0.2}, h, q}, obstacle));
+  EXPECT_FALSE(RectanglesOverlap({{0.55 - 0.072, 0.2}, h, q}, obstacle));
+  // Corner region: the axis-aligned bounding boxes overlap but the shapes do not.
+  EXPECT_FALSE(RectanglesOverlap({{0.65 + 0.06, 0.45 + 0.06}, h, q}, obstacle));
+  // Symmetric in its arguments.
+  const Rectangle r{{0.52, -0.06}, h, 0.4};
+  EXPECT_EQ(RectanglesOverlap(r, obstacle), RectanglesOverlap(obstacle, r));
+}
+
+TEST(PushingCost, GoalAndCollisionTerms) {
+  PushingCost with_obstacle({0.8, -0.1, 0.0}, true), free({0.8, -0.1, 0.0}, false);
+  Eigen::MatrixXd states(3, 3);
+  states << 0.8, 0.6, 0.4,  //
+      -0.1, 0.2, 0.0,       //
+      0.0, 0.0, 1.0;
+  Eigen::VectorXd c1 = Eigen::VectorXd::Zero(3), c2 = Eigen::VectorXd::Zero(3);
+  with_obstacle.Accumulate(states, c1);
+  free.Accumulate(states, c2);
+  EXPECT_DOUBLE_EQ(c2[0], 0.0);
+  EXPECT_DOUBLE_EQ(c2[2], 0.16 + 0.01 + 0.1);
+  EXPECT_DOUBLE_EQ(c1[1] - c2[1], 100.0);  // inside the obstacle
+  EXPECT_DOUBLE_EQ(c1[2], c2[2]);
+}
+
+}  // namespace
+}  // namespace diffdyn
