@@ -1,0 +1,160 @@
+// diffdyn train / eval: flags, defaults in --help, --json keys, model files that
+// eval reads back, and one-line errors naming the file and line for bad CSVs.
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "run_diffdyn.h"
+
+namespace diffdyn {
+namespace {
+
+using testing::RunDiffdyn;
+
+const std::string kData = std::string(DIFFDYN_SHARED_DATA_DIR) + "/pybullet_pushing/collected_data.csv";
+
+// The header and the first `trajectories` trajectories of the shared data (11 rows each).
+std::string Head(int trajectories) {
+  std::ifstream in(kData);
+  std::string line, out;
+  for (int i = 0; i < 1 + 11 * trajectories && std::getline(in, line); ++i) out += line + "\n";
+  return out;
+}
+
+std::string WriteTemp(const std::string& name, const std::string& contents) {
+  const std::string path = ::testing::TempDir() + "/" + name;
+  std::ofstream(path) << contents;
+  return path;
+}
+
+int CountLines(const std::string& s) {
+  int n = 0;
+  for (char c : s) n += c == '\n';
+  return n;
+}
+
+TEST(TrainCommand, HelpPrintsTheIssueDefaults) {
+  const auto r = RunDiffdyn("train --help");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* s : {"--data", "--model", "abs-nn", "--solver", "rk4", "--steps", "10", "--hidden",
+                        "100", "--loss", "single", "--epochs", "--lr", "0.001", "--batch", "500",
+                        "--val-fraction", "0.2", "--seed", "--out", "--json"}) {
+    EXPECT_NE(r.out.find(s), std::string::npos) << s;
+  }
+}
+
+TEST(TrainCommand, TrainsSavesAndEvalReadsBack) {
+  const std::string csv = WriteTemp("train_eval_20.csv", Head(20));
+  const std::string model = ::testing::TempDir() + "/train_eval_node.json";
+  const auto train = RunDiffdyn("train --data " + csv +
+                                " --model abs-node --hidden 8 --steps 3 --epochs 3 --seed 4 --quiet"
+                                " --json --out " + model);
+  ASSERT_EQ(train.exit_code, 0) << train.err;
+  ASSERT_EQ(CountLines(train.out), 1) << train.out;
+  const auto j = nlohmann::json::parse(train.out);
+  EXPECT_EQ(j["model_path"], model);
+  EXPECT_EQ(j["n_train"].get<int>() + j["n_val"].get<int>(), 200);
+  EXPECT_EQ(j["n_val"], 40);
+  EXPECT_EQ(j["epochs"], 3);
+  EXPECT_GT(j["seconds_per_epoch"].get<double>(), 0.0);
+  EXPECT_GT(j["final_train_loss"].get<double>(), 0.0);
+  EXPECT_GT(j["final_val_loss"].get<double>(), 0.0);
+  ASSERT_TRUE(std::filesystem::exists(model));
+
+  const auto eval = RunDiffdyn("eval --model " + model + " --data " + csv + " --json");
+  ASSERT_EQ(eval.exit_code, 0) << eval.err;
+  const auto e = nlohmann::json::parse(eval.out);
+  EXPECT_EQ(e["n_samples"], 200);
+  const double single = e["single_step_loss"].get<double>();
+  const double multi = e["avg_multi_step_loss"].get<double>();
+  EXPECT_GT(single, 0.0);
+  EXPECT_GT(multi, 0.0);
+  // Train and validation losses are means over a split of the same 200 samples.
+  const double train_val = (160 * j["final_train_loss"].get<double>() +
+                            40 * j["final_val_loss"].get<double>()) / 200;
+  EXPECT_LT(std::abs(single - train_val), 0.5 * train_val);
+
+  // Same seed, same model file bytes.
+  const std::string again = ::testing::TempDir() + "/train_eval_node_again.json";
+  ASSERT_EQ(RunDiffdyn("train --data " + csv + " --model abs-node --hidden 8 --steps 3 --epochs 3"
+                       " --seed 4 --quiet --threads 1 --out " + again).exit_code, 0);
+  std::ifstream a(model), b(again);
+  std::stringstream sa, sb;
+  sa << a.rdbuf();
+  sb << b.rdbuf();
+  nlohmann::json ja = nlohmann::json::parse(sa.str()), jb = nlohmann::json::parse(sb.str());
+  EXPECT_EQ(ja["parameters"], jb["parameters"]);
+}
+
+TEST(TrainCommand, MultiStepLossUsesFourStepWindows) {
+  const std::string csv = WriteTemp("train_multi_20.csv", Head(20));
+  const auto r = RunDiffdyn("train --data " + csv + " --model res-nn --hidden 8 --loss multi --epochs 2"
+                            " --quiet --json --out " + ::testing::TempDir() + "/train_multi.json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["n_train"].get<int>() + j["n_val"].get<int>(), 140);  // 7 windows per trajectory
+}
+
+TEST(TrainCommand, BadOptionsAreOneLineErrors) {
+  const std::string csv = WriteTemp("train_opts.csv", Head(3));
+  for (const auto& [args, fragment] :
+       std::vector<std::pair<std::string, std::string>>{{"--model node", "--model"},
+                                                        {"--solver rk5", "--solver"},
+                                                        {"--steps 1", "--steps"},
+                                                        {"--loss double", "--loss"}}) {
+    const auto r = RunDiffdyn("train --data " + csv + " --epochs 1 --quiet " + args + " --out " +
+                              ::testing::TempDir() + "/unused.json");
+    EXPECT_EQ(r.exit_code, 2) << args;
+    EXPECT_EQ(CountLines(r.err), 1) << r.err;
+    EXPECT_NE(r.err.find(fragment), std::string::npos) << r.err;
+  }
+}
+
+// Each broken file: exit 2, one line naming the file and the line number.
+TEST(TrainAndEval, BadDataFilesNameFileAndLine) {
+  const std::string good = Head(2);
+  std::vector<std::pair<std::string, std::string>> cases;
+  // Missing column (header and rows without push_length).
+  {
+    std::string s;
+    std::istringstream in(good);
+    std::string line;
+    while (std::getline(in, line)) s += line.substr(0, line.rfind(',')) + "\n";
+    cases.push_back({"missing_column.csv", s});
+  }
+  std::string nan = good;
+  nan.replace(nan.find('\n', nan.find('\n') + 1) + 1, 1, "0,1,nan");  // row 2 starts "0,1,..."
+  cases.push_back({"nan.csv", nan});
+  std::string text = good;
+  const size_t row3 = text.find("\n0,2,") + 1;
+  text.replace(row3, 5, "0,2,abc");
+  cases.push_back({"text.csv", text});
+  std::string ragged = good;
+  const size_t row4 = ragged.find("\n0,3,") + 1;
+  ragged.replace(row4, 4, "0,5,");
+  cases.push_back({"ragged.csv", ragged});
+  const std::string model = ::testing::TempDir() + "/bad_data_model.json";
+  ASSERT_EQ(RunDiffdyn("train --data " + WriteTemp("good.csv", good) +
+                       " --hidden 4 --epochs 1 --quiet --out " + model).exit_code, 0);
+  for (const auto& [name, contents] : cases) {
+    const std::string path = WriteTemp(name, contents);
+    for (const std::string& cmd : {"train --epochs 1 --quiet --out " + ::testing::TempDir() +
+                                       "/unused.json --data " + path,
+                                   "eval --model " + model + " --data " + path}) {
+      const auto r = RunDiffdyn(cmd);
+      EXPECT_EQ(r.exit_code, 2) << name << ": " << r.err;
+      EXPECT_EQ(CountLines(r.err), 1) << r.err;
+      EXPECT_NE(r.err.find(path + ":"), std::string::npos) << r.err;
+    }
+  }
+  const auto missing = RunDiffdyn("eval --model " + model + " --data /nonexistent/x.csv");
+  EXPECT_EQ(missing.exit_code, 2);
+  EXPECT_NE(missing.err.find("/nonexistent/x.csv"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace diffdyn
