@@ -1,0 +1,110 @@
+// diffdyn collect: the JSON summary, byte-identical output at 1 and 2 threads,
+// and one-line errors with exit code 2 that name the bad option.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "diffdyn/physics/pushing_csv.h"
+
+namespace {
+
+struct Result {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+// Runs `DIFFDYN_EXE args` through the shell; stderr goes to a file of its own.
+// (The same pattern as cli_test.cc; to be replaced by the shared tests/cli/run_diffdyn.h.)
+Result RunDiffdyn(const std::string& args) {
+  std::string err_file = ::testing::TempDir() + "/diffdyn_collect_XXXXXX";
+  const int fd = mkstemp(err_file.data());
+  if (fd >= 0) close(fd);
+  Result result;
+  FILE* pipe = popen((std::string(DIFFDYN_EXE) + " " + args + " 2>" + err_file).c_str(), "r");
+  if (pipe == nullptr) return result;
+  std::array<char, 4096> buffer{};
+  size_t n = 0;
+  while ((n = fread(buffer.data(), 1, buffer.size(), pipe)) > 0) result.out.append(buffer.data(), n);
+  const int status = pclose(pipe);
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  if (FILE* err = fopen(err_file.c_str(), "r")) {
+    while ((n = fread(buffer.data(), 1, buffer.size(), err)) > 0) result.err.append(buffer.data(), n);
+    fclose(err);
+  }
+  std::remove(err_file.c_str());
+  return result;
+}
+
+std::string TempPath(const std::string& name) {
+  return (std::filesystem::path(::testing::TempDir()) / name).string();
+}
+
+std::string ReadAll(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+int Lines(const std::string& s) {
+  int n = 0;
+  for (char c : s) n += c == '\n';
+  return n;
+}
+
+TEST(CollectCommand, JsonSummaryAndIdenticalBytesAtOneAndTwoThreads) {
+  const std::string one = TempPath("collect_one.csv"), two = TempPath("collect_two.csv");
+  const std::string common = " --trajectories 3 --length 3 --seed 5 --quiet --json --out ";
+  const auto r1 = RunDiffdyn("collect --threads 1" + common + one);
+  ASSERT_EQ(r1.exit_code, 0) << r1.err;
+  EXPECT_EQ(Lines(r1.out), 1) << r1.out;
+  const auto summary = nlohmann::json::parse(r1.out);
+  EXPECT_EQ(summary.at("path").get<std::string>(), one);
+  EXPECT_EQ(summary.at("trajectories").get<int>(), 3);
+  const int pushes = summary.at("pushes").get<int>();
+  EXPECT_GE(pushes, 1);
+  EXPECT_LE(pushes, 9);
+  EXPECT_GT(summary.at("seconds").get<double>(), 0.0);
+  EXPECT_NEAR(summary.at("pushes_per_second").get<double>(),
+              pushes / summary.at("seconds").get<double>(), 1e-6);
+
+  const auto data = diffdyn::ReadPushingCsv(one);
+  ASSERT_EQ(data.size(), 3u);
+  for (const auto& t : data) EXPECT_EQ(t.states.size(), t.actions.size() + 1);
+
+  const auto r2 = RunDiffdyn("collect --threads 2" + common + two);
+  ASSERT_EQ(r2.exit_code, 0) << r2.err;
+  EXPECT_EQ(ReadAll(one), ReadAll(two));
+}
+
+TEST(CollectCommand, BadOptionsAreOneLineErrorsWithExitCode2) {
+  const std::string out = TempPath("collect_bad.csv");
+  std::filesystem::remove(out);
+  struct Case {
+    std::string args, names;
+  };
+  for (const Case& c : {Case{"--starts nowhere --out " + out, "--starts"},
+                        Case{"--trajectories 0 --out " + out, "--trajectories"},
+                        Case{"--length -1 --out " + out, "--length"},
+                        Case{"--threads 0 --out " + out, "--threads"},
+                        Case{"--out /nonexistent_dir/pushes.csv", "--out"},
+                        Case{"--trajectories 2", "--out"}}) {
+    const auto r = RunDiffdyn("collect --quiet " + c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args;
+    EXPECT_EQ(Lines(r.err), 1) << c.args << ": " << r.err;
+    EXPECT_EQ(r.err.rfind("error: ", 0), 0u) << r.err;
+    EXPECT_NE(r.err.find(c.names), std::string::npos) << c.args << ": " << r.err;
+  }
+  EXPECT_FALSE(std::filesystem::exists(out));  // nothing written half-way
+}
+
+}  // namespace
