@@ -1,10 +1,5 @@
 // diffdyn collect: the JSON summary, byte-identical output at 1 and 2 threads,
 // and one-line errors with exit code 2 that name the bad option.
-#include <sys/wait.h>
-#include <unistd.h>
-
-#include <array>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -14,35 +9,11 @@
 #include <nlohmann/json.hpp>
 
 #include "diffdyn/physics/pushing_csv.h"
+#include "run_diffdyn.h"
 
 namespace {
 
-struct Result {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-// Runs `DIFFDYN_EXE args` through the shell; stderr goes to a file of its own.
-// (The same pattern as cli_test.cc; to be replaced by the shared tests/cli/run_diffdyn.h.)
-Result RunDiffdyn(const std::string& args) {
-  std::string err_file = ::testing::TempDir() + "/diffdyn_collect_XXXXXX";
-  const int fd = mkstemp(err_file.data());
-  if (fd >= 0) close(fd);
-  Result result;
-  FILE* pipe = popen((std::string(DIFFDYN_EXE) + " " + args + " 2>" + err_file).c_str(), "r");
-  if (pipe == nullptr) return result;
-  std::array<char, 4096> buffer{};
-  size_t n = 0;
-  while ((n = fread(buffer.data(), 1, buffer.size(), pipe)) > 0) result.out.append(buffer.data(), n);
-  const int status = pclose(pipe);
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  if (FILE* err = fopen(err_file.c_str(), "r")) {
-    while ((n = fread(buffer.data(), 1, buffer.size(), err)) > 0) result.err.append(buffer.data(), n);
-    fclose(err);
-  }
-  std::remove(err_file.c_str());
-  return result;
-}
+using diffdyn::testing::RunDiffdyn;
 
 std::string TempPath(const std::string& name) {
   return (std::filesystem::path(::testing::TempDir()) / name).string();
