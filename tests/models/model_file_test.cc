@@ -5,6 +5,8 @@
 #include <fstream>
 #include <string>
 
+#include <unistd.h>
+
 #include <gtest/gtest.h>
 
 #include "diffdyn/models/init.h"
@@ -14,8 +16,10 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// One folder per process: ctest runs every test as its own process, in parallel.
 fs::path TempDir() {
-  const fs::path dir = fs::path(DIFFDYN_BINARY_DIR) / "test_tmp" / "models";
+  const fs::path dir = fs::path(DIFFDYN_BINARY_DIR) / "test_tmp" /
+                       ("models_" + std::to_string(getpid()));
   fs::create_directories(dir);
   return dir;
 }
