@@ -1,0 +1,109 @@
+// Pushing trials: MPPI over a transition model, executed in the ODE-engine world.
+//
+// A trial puts the block at the task's start pose plus a seeded perturbation
+// (uniform in a disc of radius start_xy_jitter and in +-start_theta_jitter),
+// then repeats: MPPI (solvers/mppi.h) plans with `model` from the block's true
+// pose, the first action is executed by PushingEnv (the ODE world), and the
+// trial ends at the first of
+//
+//   success           |p_xy - g_xy| < goal_tolerance after a push
+//   obstacle_contact  the block touched the obstacle in the ODE world (any contact fails)
+//   off_table         the block left the table
+//   unreachable       the arm could not execute the action
+//   max_steps         max_steps pushes without any of the above
+//
+// Tasks (the NeuralODE-Panda seed's):
+//   obstacle  start (0.4, 0, -0.2 pi), goal (0.8, -0.1, 0), cost with 100 x in_collision
+//   free      start (0.4, 0, 0.2 pi),  goal (0.8, 0, 0),    no collision cost
+// MPPI: Sigma = 0.5 I, lambda = 0.01, u in [-1, 1] x [-pi/2, pi/2] x [0, 1].
+//
+// Trial i draws its perturbation and its MPPI seed from TrajectoryRng(seed, i)
+// (pushing_collect.h), so any subset of trials and any thread count give the
+// same poses and actions; only the timings vary.
+//
+//   diffdyn::PushTaskOptions options;          // obstacle task, K = 1000, T = 20
+//   auto summary = diffdyn::RunPushTrials(model, /*trials=*/20, options, /*seed=*/1);
+//   summary.success_rate;                      // with summary.ci95_low / ci95_high
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "diffdyn/autodiff_ode/progress.h"
+#include "diffdyn/models/transition_model.h"
+#include "diffdyn/physics/pushing_env.h"
+
+namespace diffdyn {
+
+/// Settings of a series of pushing trials (see the file comment).
+struct PushTaskOptions {
+  bool obstacle = true;              ///< obstacle task (true) or free task (false)
+  int samples = 1000;                ///< MPPI K
+  int horizon = 20;                  ///< MPPI T
+  int max_steps = 20;                ///< pushes per trial (>= 1)
+  double start_xy_jitter = 0.02;     ///< start perturbation: uniform in a disc of this radius (m)
+  double start_theta_jitter = 0.1;   ///< start perturbation: uniform in +-this (rad)
+  double goal_tolerance = 0.1;       ///< success: block centre within this of the goal (m)
+  int threads = 0;                   ///< MPPI threads (<= 0: all cores); results do not depend on it
+  PushingConfig world;               ///< the ODE world (its obstacle flag is set from `obstacle`)
+  double lambda = 0.01;              ///< MPPI temperature
+  double noise_variance = 0.5;       ///< MPPI Sigma = noise_variance I
+  std::optional<Eigen::Vector3d> start;  ///< overrides the task's nominal start pose
+  std::optional<Eigen::Vector3d> goal;   ///< overrides the task's goal pose
+};
+
+/// One trial's record.
+struct PushTrial {
+  bool success = false;
+  int pushes = 0;
+  /// "success", "obstacle_contact", "off_table", "unreachable" or "max_steps".
+  std::string outcome;
+  Eigen::Vector3d start = Eigen::Vector3d::Zero();  ///< perturbed start pose
+  Eigen::Vector3d goal = Eigen::Vector3d::Zero();
+  std::vector<Eigen::Vector3d> poses;    ///< pushes + 1 block poses, poses[0] = start
+  std::vector<Eigen::Vector3d> actions;  ///< pushes actions
+  std::vector<double> command_ms;        ///< wall time of each MPPI command (ms)
+};
+
+/// Totals of RunPushTrials.
+struct PushTrialsSummary {
+  int trials = 0, successes = 0;
+  double success_rate = 0, ci95_low = 0, ci95_high = 0;  ///< Wilson score interval
+  double mean_pushes = 0;            ///< over all trials
+  double ms_per_command = 0;         ///< median over all commands
+  std::vector<PushTrial> runs;
+};
+
+/// The task's nominal start pose: obstacle (0.4, 0, -0.2 pi), free (0.4, 0, 0.2 pi).
+Eigen::Vector3d PushTaskStart(bool obstacle);
+
+/// The task's goal pose: obstacle (0.8, -0.1, 0), free (0.8, 0, 0).
+Eigen::Vector3d PushTaskGoal(bool obstacle);
+
+/// Wilson score interval for a binomial proportion s / n (z = 1.96: 95 %):
+///   (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n),  p = s / n.
+/// Throws diffdyn::Error unless 0 <= successes <= trials and trials >= 1.
+std::pair<double, double> WilsonInterval(int successes, int trials, double z = 1.96);
+
+/// Throws diffdyn::Error naming the option when `options` is unusable.
+void ValidatePushTaskOptions(const PushTaskOptions& options);
+
+/// Runs trial `index` of a series seeded by `seed` (see the file comment).
+/// `model` must have state and action size 3.
+PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOptions& options,
+                       std::uint64_t seed);
+
+/// Runs `trials` seeded trials of MPPI over `model` in the ODE world, one after
+/// another; trial i uses seeds derived from (seed, i). `progress` (may be null)
+/// is updated after each trial with the successes so far. Throws diffdyn::Error
+/// for bad options or a model of the wrong sizes.
+PushTrialsSummary RunPushTrials(const TransitionModel& model, int trials,
+                                const PushTaskOptions& options, std::uint64_t seed,
+                                ProgressBar* progress = nullptr);
+
+}  // namespace diffdyn
