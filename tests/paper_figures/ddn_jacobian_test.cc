@@ -1,9 +1,13 @@
 // DDN Figure 2 on a reduced, fixed-seed configuration (4,096 samples, width
-// 128 in 1-D and 64 in 2-D, batch 64, 120 epochs, lr 2e-3, seed 42): the qualitative findings of the
-// authors' experiment must hold.
+// 128 in 1-D and 64 in 2-D, batch 64, 120 epochs, lr 2e-3, seed 42; seeds 1
+// and 2 too for the seed-sensitive 1-D relu gain): the qualitative findings
+// of the authors' experiment must hold.
+#include <algorithm>
+#include <cstdint>
 #include <map>
 #include <string>
 #include <tuple>
+#include <vector>
 
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
@@ -60,11 +64,31 @@ TEST(DdnJacobianFigure, ReducedRunShowsTheAuthorsFindings) {
   const double softplus2 = get(2, "softplus", true).mse_j;
   EXPECT_LT(5.0 * softplus2, relu2) << "relu " << relu2 << " softplus " << softplus2;
 
-  // The Jacobian loss lowers the Jacobian error: relu 1-D and 2-D, softplus 2-D.
-  for (const auto& [dim, act] : {std::pair{1, std::string("relu")}, std::pair{2, std::string("relu")},
-                                 std::pair{2, std::string("softplus")}}) {
+  // The Jacobian loss lowers the Jacobian error: relu 2-D and softplus 2-D at
+  // seed 42 (2.0-3.6x and 40-105x over seeds 1-5 and 42 in this configuration).
+  for (const auto& [dim, act] : {std::pair{2, std::string("relu")}, std::pair{2, std::string("softplus")}}) {
     EXPECT_LT(get(dim, act, true).mse_j, get(dim, act, false).mse_j) << dim << "-D " << act;
   }
+  // relu 1-D: the gain varies with the seed (1.2x to 4.2x over seeds 1-5 and
+  // 42), because the Jacobian loss cannot move relu's kinks and most of the
+  // gain comes from the slopes of the two end pieces (README), so assert on the
+  // median gain of three seeds.
+  std::vector<double> gains;
+  for (std::uint64_t seed : {42, 1, 2}) {
+    double mse_j[2];
+    for (bool jac : {true, false}) {
+      if (seed == 42) {
+        mse_j[jac] = get(1, "relu", jac).mse_j;
+      } else {
+        Config c = Reduced(1, Activation::Relu(), jac);
+        c.seed = seed;
+        mse_j[jac] = RunExperiment(c).mse_j;
+      }
+    }
+    gains.push_back(mse_j[false] / mse_j[true]);
+  }
+  std::sort(gains.begin(), gains.end());
+  EXPECT_GT(gains[1], 1.0) << "1-D relu gains " << gains[0] << ' ' << gains[1] << ' ' << gains[2];
 
   // Every network fits f.
   for (const auto& [key, r] : results) {
