@@ -22,8 +22,10 @@
 // second-order chain (Mlp::ValueJacobianHessian).
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <numbers>
 #include <string>
 #include <vector>
@@ -54,6 +56,8 @@ struct Config {
   std::uint64_t seed = 42;
   int grid = 0;                 ///< test points per axis; 0: 100 in 1-D, 50 in 2-D
   int threads = 1;
+  /// Called after every epoch with (epochs done, mean training loss), e.g. for a progress bar.
+  std::function<void(int, double)> on_epoch;
 };
 
 /// Samples in columns: x (dim x n), f (1 x n), J (1 x dim n), H (1 x dim^2 n).
@@ -183,6 +187,7 @@ inline Result RunExperiment(const Config& config) {
       epoch_loss += loss / batches.num_batches();
       adam.Step(grad, &net.mutable_parameters());
     }
+    if (config.on_epoch) config.on_epoch(epoch + 1, epoch_loss);
   }
   const int points = config.grid > 0 ? config.grid : (config.dim == 1 ? 100 : 50);
   const Dataset test = MakeTestGrid(config.dim, points);
@@ -195,6 +200,46 @@ inline Result RunExperiment(const Config& config) {
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   result.net = std::move(net);
   return result;
+}
+
+/// Where a 1-D network's Jacobian error sits (used for relu, whose Jacobian is
+/// piecewise constant with kinks at x_i = -b_i / w_i).
+struct JacobianErrorSplit {
+  double grid_interior = 0.0;  ///< J MSE on the 100-point test grid without its 2 end points at each side
+  double fine = 0.0;           ///< J MSE on a fine midpoint grid of [-pi, pi] (the integral mean)
+  double own_kink_floor = 0.0; ///< fine-grid MSE of the best piecewise-constant fit of cos x with the net's own pieces
+  int pieces = 0;              ///< pieces of constant slope inside [-pi, pi]
+};
+
+/// Splits a 1-D network's Jacobian error. The pieces are maximal runs of the
+/// fine grid with equal slope (to 1e-9); on each piece the best constant is
+/// the mean of cos x, so own_kink_floor is what a loss on J alone could reach
+/// without moving the kinks.
+inline JacobianErrorSplit SplitJacobianError1d(const Mlp<double>& net, int fine_points = 40000) {
+  DIFFDYN_CHECK(net.architecture().num_inputs() == 1, "SplitJacobianError1d needs a 1-D network");
+  JacobianErrorSplit s;
+  const Dataset test = MakeTestGrid(1, 100);
+  const Dataset pred = Predict(net, test.x);
+  for (Eigen::Index i = 2; i < 98; ++i) s.grid_interior += std::pow(pred.jac(0, i) - test.jac(0, i), 2) / 96.0;
+  std::vector<double> net_j(fine_points), true_j(fine_points);
+  Eigen::VectorXd x(1), y;
+  Eigen::MatrixXd jac;
+  for (int i = 0; i < fine_points; ++i) {
+    x[0] = -std::numbers::pi + 2.0 * std::numbers::pi * (i + 0.5) / fine_points;
+    net.ValueAndJacobian(x, &y, &jac);
+    net_j[i] = jac(0, 0);
+    true_j[i] = std::cos(x[0]);
+    s.fine += std::pow(net_j[i] - true_j[i], 2) / fine_points;
+  }
+  for (int start = 0, i = 1; i <= fine_points; ++i) {
+    if (i < fine_points && std::abs(net_j[i] - net_j[i - 1]) <= 1e-9) continue;
+    double mean = 0.0;
+    for (int k = start; k < i; ++k) mean += true_j[k] / (i - start);
+    for (int k = start; k < i; ++k) s.own_kink_floor += std::pow(true_j[k] - mean, 2) / fine_points;
+    ++s.pieces;
+    start = i;
+  }
+  return s;
 }
 
 }  // namespace diffdyn::ddn_figure

@@ -14,6 +14,7 @@
 
 #include "ddn_experiment.h"
 #include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/autodiff_ode/progress.h"
 #include "diffdyn/models/model_file.h"
 
 namespace fs = std::filesystem;
@@ -34,12 +35,66 @@ Activation ParseFigureActivation(const std::string& name) {
   return MakeActivation(name);
 }
 
+// Trains one network with a progress bar over its epochs.
+ddn_figure::Result Train(ddn_figure::Config config, const std::string& label, bool quiet) {
+  ProgressBar bar(label, config.epochs, !quiet);
+  config.on_epoch = [&](int epoch, double loss) { bar.Update(epoch, StrCat("loss ", loss)); };
+  return ddn_figure::RunExperiment(config);
+}
+
+// --sweep-seeds: both losses per (dim, activation, seed); writes seed_sweep.csv
+// with the test MSEs and, in 1-D, where the Jacobian error sits
+// (ddn_figure::SplitJacobianError1d).
+void SweepSeeds(const ddn_figure::Config& base, const std::vector<std::string>& dims,
+                const std::vector<std::string>& acts, const std::vector<std::string>& seeds,
+                const std::string& out, bool quiet) {
+  std::ostringstream csv;
+  csv.precision(6);
+  csv << "dim,activation,seed,loss,mse_f,mse_j,mse_h,mse_j_interior,mse_j_fine,mse_j_own_kink_floor,pieces\n";
+  std::printf("%-3s %-9s %5s %10s %10s %7s %12s\n", "dim", "act", "seed", "J f+J", "J f", "gain", "gain interior");
+  for (const std::string& dim_name : dims) {
+    for (const std::string& act_name : acts) {
+      for (const std::string& seed_name : seeds) {
+        ddn_figure::Config config = base;
+        config.dim = std::stoi(dim_name);
+        config.activation = ParseFigureActivation(act_name);
+        config.seed = std::stoull(seed_name);
+        double mse_j[2] = {0, 0}, interior[2] = {0, 0};
+        for (bool jac_loss : {true, false}) {
+          config.jacobian_loss = jac_loss;
+          const std::string loss = jac_loss ? "f+J" : "f";
+          const ddn_figure::Result r =
+              Train(config, StrCat(dim_name, "-D ", act_name, " ", loss, " seed ", seed_name), quiet);
+          mse_j[jac_loss] = r.mse_j;
+          csv << config.dim << ',' << act_name << ',' << config.seed << ',' << loss << ',' << r.mse_f << ','
+              << r.mse_j << ',' << r.mse_h;
+          if (config.dim == 1) {
+            const ddn_figure::JacobianErrorSplit split = ddn_figure::SplitJacobianError1d(r.net);
+            interior[jac_loss] = split.grid_interior;
+            csv << ',' << split.grid_interior << ',' << split.fine << ',' << split.own_kink_floor << ','
+                << split.pieces << '\n';
+          } else {
+            csv << ",,,,\n";
+          }
+        }
+        std::printf("%-3d %-9s %5s %10.2e %10.2e %7.2f", config.dim, act_name.c_str(), seed_name.c_str(),
+                    mse_j[1], mse_j[0], mse_j[0] / mse_j[1]);
+        if (config.dim == 1) std::printf(" %12.2f", interior[0] / interior[1]);
+        std::printf("\n");
+        std::fflush(stdout);
+      }
+    }
+  }
+  WriteFileAtomically(fs::path(out) / "seed_sweep.csv", [&](std::ostream& f) { f << csv.str(); });
+  std::printf("wrote %s/seed_sweep.csv\n", out.c_str());
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{"DDN Figure 2: Jacobian accuracy of relu / softplus / tanh / cos networks"};
-  bool quick = false, plot = false;
-  std::string out = "ddn_jacobian_out", dims_arg = "1,2", acts_arg = "relu,softplus,tanh,cos";
+  bool quick = false, plot = false, quiet = false;
+  std::string out = "ddn_jacobian_out", dims_arg = "1,2", acts_arg = "relu,softplus,tanh,cos", sweep_seeds;
   ddn_figure::Config base;
   app.add_flag("--quick", quick, "tiny run (a few seconds): 2,560 samples, 3 epochs, relu and softplus");
   app.add_option("--out", out, "output folder for CSVs, model files and PNGs")->capture_default_str();
@@ -53,6 +108,9 @@ int main(int argc, char** argv) {
   app.add_option("--seed", base.seed, "seed of data, initialisation and shuffling")->capture_default_str();
   app.add_option("--threads", base.threads, "threads per training step")->capture_default_str();
   app.add_flag("--plot", plot, "draw the PNGs with plot.py (Debian python3-matplotlib)");
+  app.add_option("--sweep-seeds", sweep_seeds,
+                 "comma-separated seeds: instead of the figure, train both losses per seed and write seed_sweep.csv");
+  app.add_flag("--quiet", quiet, "no progress bars");
   CLI11_PARSE(app, argc, argv);
   if (quick) {
     base.n_train = 2560;
@@ -61,6 +119,10 @@ int main(int argc, char** argv) {
   }
   try {
     fs::create_directories(out);
+    if (!sweep_seeds.empty()) {
+      SweepSeeds(base, Split(dims_arg), Split(acts_arg), Split(sweep_seeds), out, quiet);
+      return 0;
+    }
     std::ostringstream results;
     results << "dim,activation,loss,mse_f,mse_j,mse_h,final_train_loss,seconds\n";
     std::printf("%-3s %-9s %-4s %10s %10s %10s %8s\n", "dim", "act", "loss", "mse_f", "mse_j", "mse_h", "sec");
@@ -76,8 +138,8 @@ int main(int argc, char** argv) {
           config.dim = dim;
           config.activation = ParseFigureActivation(act_name);
           config.jacobian_loss = jac_loss;
-          const ddn_figure::Result r = ddn_figure::RunExperiment(config);
           const std::string loss = jac_loss ? "f+J" : "f";
+          const ddn_figure::Result r = Train(config, StrCat(dim, "-D ", act_name, " ", loss), quiet);
           std::printf("%-3d %-9s %-4s %10.2e %10.2e %10.2e %8.1f\n", dim, act_name.c_str(), loss.c_str(),
                       r.mse_f, r.mse_j, r.mse_h, r.seconds);
           std::fflush(stdout);
