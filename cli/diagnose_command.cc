@@ -280,7 +280,8 @@ void RegisterDiagnoseCommand(CLI::App& app) {
   command->add_option("--param", o->params, "Nominal parameter override name=value (repeatable)");
   command->add_option("--params", o->params_file, "JSON file {name: value} of nominal parameters");
   command->add_option("--out", o->out, "Output folder (report.md, extended_model.json, plots)")->required();
-  command->add_option("--cutoff-hz", o->pipeline.cutoff_hz, "Zero-phase smoothing cutoff (Hz)");
+  command->add_option("--cutoff-hz", o->pipeline.cutoff_hz,
+                      "Zero-phase smoothing cutoff (Hz, at most 10; default 0: chosen by cross-validation)");
   command->add_option("--holdout", o->pipeline.holdout_fraction, "Held-out fraction at the end (in time)");
   command->add_option("--fit-param", o->fit_params, "Nominal parameter fitted on the first quarter first (repeatable)");
   command->add_option("--scale-param", o->scale_params,

@@ -284,8 +284,17 @@ std::string EffectUnit(const AnalyticModel& model, const Effect& effect, int par
   return prismatic ? info.prismatic_units[param] : info.units[param];
 }
 
-DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen::VectorXd& params,
-                         const JointData& data, const DiagnosisOptions& options) {
+namespace {
+
+// The pipeline at one smoothing cutoff (options.cutoff_hz > 0). `tau_noise`
+// (n) is the torque-noise estimate to use (from the 10 Hz smoothing, which
+// signal does not leak into). With `cv_gain` set, stops after the selection
+// and returns there the blocked cross-validated fraction of the nominal
+// residual's SSE that the selected effects remove (unweighted, all joints).
+DiagnosisResult DiagnoseAtCutoff(std::shared_ptr<const AnalyticModel> model,
+                                 const Eigen::VectorXd& params, const JointData& data,
+                                 const DiagnosisOptions& options,
+                                 const Eigen::VectorXd& tau_noise, double* cv_gain) {
   const auto start = std::chrono::steady_clock::now();
   DIFFDYN_CHECK(model != nullptr, "diagnose: no model");
   DIFFDYN_CHECK(data.dof() == model->dof(), "--measured ", data.path, " has ", data.dof(),
@@ -299,11 +308,13 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
 
   DiagnosisResult result;
   result.model_name = model->name();
+  result.cutoff_hz = options.cutoff_hz;
   result.n_samples = data.size();
   Context ctx;
   ctx.model = model;
   ctx.params = params;
   ctx.sd = SmoothJointData(data, options.cutoff_hz);
+  if (tau_noise.size() == ctx.sd.tau_noise.size()) ctx.sd.tau_noise = tau_noise;
   ctx.n = model->dof();
   ctx.rows = static_cast<int>(ctx.sd.rows.size());
   const int n = ctx.n, rows = ctx.rows;
@@ -630,6 +641,55 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
     return noise > 0 ? rms / noise : std::numeric_limits<double>::infinity();
   };
 
+  // The mass matrix of the extended model must stay positive definite:
+  // M_ext(q) = M(q) + sum diag(I_a) + m_p M_tip(q), where M_tip (the unit tip
+  // mass's inertia) is positive semi-definite. A negative armature or payload
+  // estimate can break this; it is checked on every training row.
+  std::vector<Eigen::MatrixXd> mass_rows, tip_mass_rows;
+  auto mass_definite = [&](const std::vector<Effect>& effects) {
+    bool negative = false;
+    for (const Effect& e : effects) {
+      if ((e.kind == EffectKind::kArmature || e.kind == EffectKind::kPayload) && e.params[0] < 0) negative = true;
+    }
+    if (!negative) return true;
+    if (mass_rows.empty()) {
+      const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+      for (int i = 0; i < train_count; ++i) {
+        const Eigen::VectorXd q = sd.q.col(sd.rows[ctx.train[i]]);
+        mass_rows.push_back(model->MassMatrix(q, ctx.params));
+        const Eigen::VectorXd bias = model->TipLoad(q, zero, zero, ctx.params);
+        Eigen::MatrixXd tm(n, n);
+        for (int c = 0; c < n; ++c) tm.col(c) = model->TipLoad(q, zero, Eigen::VectorXd::Unit(n, c), ctx.params) - bias;
+        tip_mass_rows.push_back(0.5 * (tm + tm.transpose()));
+      }
+    }
+    for (std::size_t i = 0; i < mass_rows.size(); ++i) {
+      Eigen::MatrixXd m = mass_rows[i];
+      for (const Effect& e : effects) {
+        if (e.kind == EffectKind::kArmature) m(e.joint - 1, e.joint - 1) += e.params[0];
+        if (e.kind == EffectKind::kPayload) m += e.params[0] * tip_mass_rows[i];
+      }
+      const Eigen::LDLT<Eigen::MatrixXd> ldlt(m);
+      if (ldlt.info() != Eigen::Success || !ldlt.isPositive() ||
+          ldlt.vectorD().minCoeff() <= 1e-9 * m.diagonal().cwiseAbs().maxCoeff()) {
+        return false;
+      }
+    }
+    return true;
+  };
+  // The inertial effects (armature, payload) of `set` with their linear-fit values.
+  auto inertial_effects = [&](const std::vector<int>& set, const Eval& e) {
+    const std::vector<int> s = columns_of(set);
+    std::vector<Effect> out;
+    for (int c : set) {
+      const Candidate& cand = ls.candidates[c];
+      if (cand.kind != EffectKind::kArmature && cand.kind != EffectKind::kPayload) continue;
+      const int at = static_cast<int>(std::find(s.begin(), s.end(), cand.columns[0]) - s.begin());
+      out.push_back({cand.kind, cand.joint, {e.beta[at]}, {}});
+    }
+    return out;
+  };
+
   // ---- forward stepwise selection ----
   std::vector<int> current;
   Eval cur = evaluate(current, weights_for(residual.leftCols(train_count).rowwise().squaredNorm()));
@@ -671,6 +731,12 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
       result.steps.push_back(step);
       break;
     }
+    if (!mass_definite(inertial_effects(best_set, best_eval))) {
+      step.reason = "the extended mass matrix would not be positive definite";
+      result.steps.push_back(step);
+      excluded[best] = true;
+      continue;
+    }
     if (step.contribution_to_noise < options.min_effect_to_noise) {
       step.reason = "torque contribution below the sensor-noise level";
       result.steps.push_back(step);
@@ -685,6 +751,25 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
     result.steps.push_back(step);
     current = best_set;
     cur = best_eval;
+  }
+
+  if (cv_gain != nullptr) {
+    // Unweighted blocked cross-validation of the selected set against nothing.
+    const std::vector<int> s = columns_of(current);
+    const Eigen::VectorXd w = weights_for(cur.sse);
+    double sse_nominal = 0, sse_selected = 0;
+    for (int f = 0; f < ls.folds; ++f) {
+      std::vector<bool> use(ls.folds, true);
+      use[f] = false;
+      const Eigen::VectorXd beta = FitColumns(ls, s, use, w);
+      for (int j = 0; j < n; ++j) {
+        sse_nominal += ls.energy[f][j];
+        sse_selected += FoldSse(ls, s, beta, f, j);
+      }
+    }
+    *cv_gain = sse_nominal > 0 ? 1.0 - sse_selected / sse_nominal : 0.0;
+    result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return result;
   }
 
   // ---- effects from the linear fit (values and standard errors) ----
@@ -728,7 +813,13 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
   const Eigen::VectorXd inv_sigma =
       (cur.sse.array() / train_count + sse_floor).rsqrt().matrix();
   if (options.refit && !effects.empty()) {
-    extended = RefitEffects(ctx, extended, ctx.train, inv_sigma, inflation);
+    const ExtendedModel refitted = RefitEffects(ctx, extended, ctx.train, inv_sigma, inflation);
+    if (mass_definite(refitted.effects())) {
+      extended = refitted;
+    } else {
+      result.notes.push_back("refit rejected: its armature or payload made the mass matrix indefinite; "
+                             "the linear-stage values are kept");
+    }
   }
 
   // ---- learned residuals ----
@@ -1000,6 +1091,54 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
   result.residual_nominal = residual;
   result.residual_extended = ctx.tau - pred_ext;
   result.extended = extended;
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return result;
+}
+
+}  // namespace
+
+DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen::VectorXd& params,
+                         const JointData& data, const DiagnosisOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  DIFFDYN_CHECK(options.cutoff_hz >= 0 && options.cutoff_hz <= kMaxCutoffHz, "--cutoff-hz ",
+                options.cutoff_hz, ": must be in (0, ", kMaxCutoffHz, "] Hz (0 chooses it)");
+  // The torque-noise estimate comes from the highest cutoff, where the motion
+  // does not leak into tau - smooth(tau).
+  const Eigen::VectorXd tau_noise = SmoothJointData(data, kMaxCutoffHz).tau_noise;
+  if (options.cutoff_hz > 0) return DiagnoseAtCutoff(model, params, data, options, tau_noise, nullptr);
+  // Automatic cutoff: the selection stage at each cutoff of the grid, scored by
+  // the cross-validated SSE fraction its named effects remove on the training
+  // rows; the highest cutoff within kCutoffTolerance of the best score wins.
+  std::vector<double> scores;
+  std::string tried;
+  for (double cutoff : kCutoffGrid) {
+    DiagnosisOptions at = options;
+    at.cutoff_hz = cutoff;
+    double gain = 0.0;
+    try {
+      DiagnoseAtCutoff(model, params, data, at, tau_noise, &gain);
+    } catch (const Error&) {
+      gain = -std::numeric_limits<double>::infinity();  // record too short for this cutoff
+    }
+    scores.push_back(gain);
+    tried += StrCat(tried.empty() ? "" : ", ", cutoff, " Hz: ", gain);
+  }
+  const double best = *std::max_element(scores.begin(), scores.end());
+  double chosen = kCutoffGrid[0];
+  for (std::size_t i = 0; i < scores.size(); ++i) {
+    if (scores[i] >= best - kCutoffTolerance) {
+      chosen = kCutoffGrid[i];
+      break;
+    }
+  }
+  DiagnosisOptions at = options;
+  at.cutoff_hz = chosen;
+  DiagnosisResult result = DiagnoseAtCutoff(model, params, data, at, tau_noise, nullptr);
+  result.cutoff_hz = chosen;
+  result.notes.insert(result.notes.begin(),
+                      StrCat("cutoff chosen: ", chosen, " Hz, the highest whose cross-validated SSE "
+                             "removed on the training rows is within ", kCutoffTolerance,
+                             " of the best (", tried, ")"));
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }

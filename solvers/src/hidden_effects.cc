@@ -188,8 +188,8 @@ HiddenEffectCase GenerateHiddenEffectCase(const std::string& model_name, std::ui
     if (c % record_every == 0 && recorded < data.t.size()) {
       data.t[recorded] = t;
       for (int j = 0; j < n; ++j) {
-        data.q(j, recorded) = q[j] + 1e-4 * StandardNormal(rng);
-        data.qd(j, recorded) = qd[j] + 2e-3 * StandardNormal(rng);
+        data.q(j, recorded) = q[j] + options.q_noise * StandardNormal(rng);
+        data.qd(j, recorded) = qd[j] + options.qd_noise * StandardNormal(rng);
         data.tau(j, recorded) = command[j] + out.tau_noise[j] * StandardNormal(rng);
       }
       ++recorded;

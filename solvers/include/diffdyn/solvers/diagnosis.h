@@ -1,7 +1,7 @@
 // Diagnosis: what does the simulation get wrong, why, and how much is gained.
 //
 // Given a nominal model tau = ID(q, qd, qdd; p) and measured data, all signals
-// are smoothed consistently (smoothing.h) and the torque residual
+// are smoothed consistently (smoothing.h, one cutoff f_c <= 10 Hz) and the torque residual
 //
 //   r_k = tau_k - ID(q_k, qd_k, qdd_k)                (n per sample)
 //
@@ -27,6 +27,16 @@
 // torque contribution is at least `min_effect_to_noise` times the sensor-noise
 // RMS. Magnitudes come with standard errors from the weighted least-squares
 // covariance, inflated by R / n_eff for the correlation of smoothed noise.
+//
+// Cutoff. qdd is the derivative of the smoothed qd, so velocity noise reaches
+// the residual amplified by M(q) sum_k beta_k^2 ~ f_c^3: where inertia
+// dominates the torque (a cart) it can swamp every effect at 10 Hz. With
+// cutoff_hz = 0 the cutoff is chosen from kCutoffGrid: the selection below is
+// run at each, scored by the blocked cross-validated fraction of the nominal
+// residual SSE its effects remove on the training rows, and the highest
+// cutoff scoring within kCutoffTolerance of the best is used (the held-out
+// rows are never looked at). The torque-noise estimate always comes from the
+// 10 Hz smoothing.
 //
 // Refit. The selected effects' parameters are refitted jointly through the
 // extended model (Ceres, Jets of JointTorque; delay through interpolation of
@@ -54,9 +64,16 @@
 
 namespace diffdyn {
 
+/// Highest smoothing cutoff (Hz) the diagnosis uses (model_conventions.md).
+inline constexpr double kMaxCutoffHz = 10.0;
+/// Cutoffs (Hz) tried when DiagnosisOptions::cutoff_hz is 0, highest first.
+inline constexpr double kCutoffGrid[] = {10.0, 7.0, 5.0, 3.5, 2.5};
+/// A lower cutoff must raise the cross-validated SSE fraction removed by more than this.
+inline constexpr double kCutoffTolerance = 0.02;
+
 /// Settings of Diagnose; defaults are what `diffdyn diagnose` uses.
 struct DiagnosisOptions {
-  double cutoff_hz = 10.0;           ///< smoothing cutoff f_c (Hz)
+  double cutoff_hz = 0.0;            ///< smoothing cutoff f_c (Hz, <= 10); 0 = chosen (header)
   double holdout_fraction = 0.3;     ///< last fraction of the rows held out
   int folds = 5;                     ///< blocked cross-validation folds
   double min_effect_to_noise = 1.0;  ///< an effect's torque RMS / sensor-noise RMS to count
@@ -99,6 +116,7 @@ struct SplitScore {
 /// Everything Diagnose finds; plot arrays are n x R over all rows.
 struct DiagnosisResult {
   std::string model_name;
+  double cutoff_hz = 0;                 ///< smoothing cutoff used (Hz)
   Eigen::VectorXd nominal_params;       ///< after calibration
   std::vector<std::string> notes;       ///< what was done (calibration, data)
   int n_samples = 0, train_rows = 0, heldout_rows = 0;

@@ -33,6 +33,8 @@ struct HiddenEffectOptions {
   int substeps = 4;           ///< RK4 steps per control period
   double ratio_min = 3.0;     ///< effect RMS / torque-noise RMS, lower end
   double ratio_max = 10.0;    ///< upper end
+  double q_noise = 1e-4;      ///< position-sensor noise sigma (rad or m)
+  double qd_noise = 2e-3;     ///< velocity-sensor noise sigma (rad/s or m/s)
   std::vector<EffectKind> kinds;  ///< kinds to draw from; empty = every named kind
 };
 
