@@ -90,6 +90,16 @@ TEST(DdnJacobianFigure, ReducedRunShowsTheAuthorsFindings) {
   std::sort(gains.begin(), gains.end());
   EXPECT_GT(gains[1], 1.0) << "1-D relu gains " << gains[0] << ' ' << gains[1] << ' ' << gains[2];
 
+  // A relu network's slope is constant between kinks, so its Jacobian error is
+  // at least the best staircase on its own pieces (at most width + 1 of them).
+  for (bool jac : {true, false}) {
+    const JacobianErrorSplit split = SplitJacobianError1d(get(1, "relu", jac).net);
+    EXPECT_LE(split.own_kink_floor, split.fine);
+    EXPECT_GT(split.own_kink_floor, 0.0);
+    EXPECT_GE(split.pieces, 2);
+    EXPECT_LE(split.pieces, 129);
+  }
+
   // Every network fits f.
   for (const auto& [key, r] : results) {
     EXPECT_LT(r.mse_f, 0.05) << std::get<0>(key) << "-D " << std::get<1>(key);
@@ -121,6 +131,19 @@ TEST(DdnJacobianFigureData, SameSeedSameNetwork) {
   EXPECT_EQ(a.mse_j, b.mse_j);
   c.seed = 43;
   EXPECT_FALSE(RunExperiment(c).net.parameters() == a.net.parameters());
+}
+
+TEST(DdnJacobianFigureData, ConstantSlopeNetworkHasOnePieceAndCosVarianceFloor) {
+  // All-zero parameters: J = 0 on one piece, so fine = floor = mean cos^2 = 1/2.
+  const Mlp<double> net(MlpArchitecture{{1, 8, 1}, {Activation::Relu()}});
+  const JacobianErrorSplit split = SplitJacobianError1d(net, 4000);
+  EXPECT_EQ(split.pieces, 1);
+  EXPECT_NEAR(split.fine, 0.5, 1e-9);
+  EXPECT_NEAR(split.own_kink_floor, 0.5, 1e-9);
+  const Dataset test = MakeTestGrid(1, 100);
+  double interior = 0.0;
+  for (Eigen::Index i = 2; i < 98; ++i) interior += test.jac(0, i) * test.jac(0, i) / 96.0;
+  EXPECT_NEAR(split.grid_interior, interior, 1e-15);
 }
 
 TEST(DdnJacobianFigureData, TestFunctionDerivativesMatchCentralDifferences) {
