@@ -17,22 +17,7 @@
 namespace diffdyn {
 
 std::vector<PushingTrajectory> ReadPushingData(const std::filesystem::path& path) {
-  std::vector<PushingTrajectory> trajectories = ReadPushingCsv(path);
-  static constexpr const char* kState[] = {"x", "y", "theta"};
-  static constexpr const char* kAction[] = {"push_location", "push_angle", "push_length"};
-  long line = 1;
-  for (const PushingTrajectory& t : trajectories) {
-    for (size_t s = 0; s < t.states.size(); ++s) {
-      ++line;
-      for (int i = 0; i < 3; ++i) {
-        DIFFDYN_CHECK(std::isfinite(t.states[s][i]), path.string(), ":", line, ": column ",
-                      kState[i], " is not finite (", t.states[s][i], ")");
-        DIFFDYN_CHECK(s >= t.actions.size() || std::isfinite(t.actions[s][i]), path.string(), ":",
-                      line, ": column ", kAction[i], " is not finite (", t.actions[s][i], ")");
-      }
-    }
-  }
-  return trajectories;
+  return ReadPushingCsv(path);
 }
 
 PushingWindows MakePushingWindows(const std::vector<PushingTrajectory>& trajectories, int horizon) {

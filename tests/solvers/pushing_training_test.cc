@@ -1,10 +1,17 @@
-// Pushing windows, the SE(2) loss, the Trainer's batch gradients (single- and
-// multi-step, through the NeuralODE) against finite differences, determinism at any
-// thread count, learning, divergence reporting and the evaluation metrics.
+// Non-finite data rejected by file and line, pushing windows, the SE(2) loss, the
+// Trainer's batch gradients (single- and multi-step, through the NeuralODE) against
+// finite differences, determinism at any thread count, learning, divergence
+// reporting and the evaluation metrics.
 #include "diffdyn/solvers/pushing_training.h"
 
+#include <unistd.h>
+
 #include <cmath>
+#include <cstdio>
+#include <fstream>
 #include <numeric>
+#include <string>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -31,6 +38,40 @@ std::vector<PushingTrajectory> SyntheticTrajectories(int count, int pushes, std:
     }
   }
   return out;
+}
+
+// Non-finite numbers are rejected by the reader itself, naming the file and the
+// line as counted in the file (blank lines included), for states and actions alike.
+TEST(ReadPushingData, NonFiniteNumbersNameFileAndLine) {
+  const std::string header = "trajectory,step,x,y,theta,push_location,push_angle,push_length\n";
+  const std::string path = ::testing::TempDir() + "/pushing_training_nonfinite_" +
+                           std::to_string(::getpid()) + ".csv";
+  for (const auto& [row2, row4, line] : std::vector<std::tuple<std::string, std::string, int>>{
+           {"0,0,nan,0,0,0,0,0.5", "0,1,0.1,0,0,,,", 2},
+           {"0,0,0.4,0,0,0,0,0.5", "0,1,0.1,0,0,0,inf,0.5", 4},
+           {"0,0,0.4,0,0,0,0,0.5", "0,1,0.1,-INF,0,,,", 4}}) {
+    {
+      std::ofstream out(path);
+      out << header << row2 << "\n\n" << row4 << "\n";  // line 3 is blank
+    }
+    try {
+      ReadPushingData(path);
+      ADD_FAILURE() << "accepted " << row2 << " / " << row4;
+    } catch (const Error& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(path + ":" + std::to_string(line) + ": "), std::string::npos) << what;
+      EXPECT_NE(what.find("not finite"), std::string::npos) << what;
+    }
+  }
+  {
+    std::ofstream out(path);
+    out << header << "0,0,0.4,0,0,0,0,0.5\n\n0,1,0.1,0,0,,,\n";
+  }
+  const auto good = ReadPushingData(path);
+  ASSERT_EQ(good.size(), 1u);
+  EXPECT_EQ(good[0].actions.size(), 1u);
+  EXPECT_DOUBLE_EQ(good[0].states[1][0], 0.1);
+  std::remove(path.c_str());
 }
 
 TEST(PushingWindows, CountsAndContents) {

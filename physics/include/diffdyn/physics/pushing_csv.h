@@ -10,7 +10,8 @@
 // `unreachable`); diffdyn writes it on the last row only. A trajectory may be
 // shorter than asked. The reader accepts files with and without `status` and
 // rejects "ragged" files (non-contiguous steps, a missing action before the last
-// row, an action on the last row) with an error naming the file and line.
+// row, an action on the last row), text in numeric fields and non-finite numbers
+// (nan, inf) with an error naming the file and line.
 //
 //   auto data = diffdyn::ReadPushingCsv("shared/data/pybullet_pushing/collected_data.csv");
 //   for (const auto& traj : data) use(traj.states, traj.actions);   // T+1 and T rows
@@ -21,6 +22,7 @@
 #pragma once
 
 #include <charconv>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <ostream>
@@ -72,8 +74,8 @@ inline void AppendNumber(std::string& out, double value) {
 }  // namespace pushing_csv_internal
 
 /// Reads a pushing CSV (with or without `status`). Throws diffdyn::Error naming
-/// `path` and the line for a missing file, a wrong header, a bad number or a
-/// ragged trajectory.
+/// `path` and the line for a missing file, a wrong header, a bad or non-finite
+/// number or a ragged trajectory.
 inline std::vector<PushingTrajectory> ReadPushingCsv(const std::filesystem::path& path) {
   using pushing_csv_internal::kColumns;
   std::ifstream in(path);
@@ -108,6 +110,9 @@ inline std::vector<PushingTrajectory> ReadPushingCsv(const std::filesystem::path
       const auto result = std::from_chars(f.data(), f.data() + f.size(), value);
       DIFFDYN_CHECK(result.ec == std::errc() && result.ptr == f.data() + f.size(), where(),
                     "column ", kColumns[i], ": '", std::string(f), "' is not a number");
+      // from_chars accepts "nan" and "inf"; no model can learn from them.
+      DIFFDYN_CHECK(std::isfinite(value), where(), "column ", kColumns[i], ": '", std::string(f),
+                    "' is not finite");
       return value;
     };
     auto parse_long = [&](size_t i) {

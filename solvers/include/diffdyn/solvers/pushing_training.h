@@ -60,9 +60,9 @@ struct PushingWindows {
   int size() const { return static_cast<int>(start.cols()); }
 };
 
-/// ReadPushingCsv plus a check that every number is finite: a NaN or infinite
-/// entry throws diffdyn::Error "<path>:<line>: ..." (lines counted as the reader
-/// writes them: header, then one row per state).
+/// The trajectories of a pushing CSV: ReadPushingCsv, which throws diffdyn::Error
+/// "<path>:<line>: ..." for a missing column, text in a numeric field, a NaN or
+/// infinite number or a ragged trajectory.
 std::vector<PushingTrajectory> ReadPushingData(const std::filesystem::path& path);
 
 /// All windows of `horizon` >= 1 steps of every trajectory, in file order (a
