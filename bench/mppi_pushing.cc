@@ -5,6 +5,8 @@
 //   BM_MppiAbsNode/T/threads   abs-NODE 6-100-100-6 ReLU, rk4 3/8 rule on 10 grid
 //                              points (9 steps), T = 20 and 30, 1 and 2 threads
 //   BM_MppiResNn/30/threads    res-NN 6-100-100-3 ReLU, T = 30
+//   (a third argument is the chunk size, 0 = MppiOptions' default; BM_MppiChunks
+//    tries others at T = 20 on 2 threads)
 //   BM_PeakDgemm2Threads       the machine's two-thread dgemm peak (peak_dgemm.h)
 //
 // The models have fixed-seed random weights; they are written as model files
@@ -69,6 +71,8 @@ MppiOptions TaskOptions(int horizon, int threads) {
   return o;
 }
 
+// The third argument overrides MppiOptions::chunk_size (0: the default).
+
 // Multiply-adds of one evaluation of an MLP 6-100-100-out, times 2.
 double FlopsPerEval(int out) { return 2.0 * (6 * 100 + 100 * 100 + 100 * out); }
 
@@ -76,7 +80,9 @@ void RunCommands(benchmark::State& state, const PushingModel& model, double eval
   const int horizon = static_cast<int>(state.range(0));
   const int threads = static_cast<int>(state.range(1));
   const PushingCost cost({0.8, -0.1, 0.0}, /*obstacle=*/true);
-  Mppi mppi(model, cost, TaskOptions(horizon, threads), 7);
+  MppiOptions options = TaskOptions(horizon, threads);
+  if (state.range(2) > 0) options.chunk_size = static_cast<int>(state.range(2));
+  Mppi mppi(model, cost, options, 7);
   const Eigen::Vector3d x(0.4, 0.0, -0.2 * std::numbers::pi);
   benchmark::DoNotOptimize(mppi.Command(x).data());  // warm-up
   for (auto _ : state) {
@@ -92,13 +98,18 @@ void RunCommands(benchmark::State& state, const PushingModel& model, double eval
 
 void BM_MppiAbsNode(benchmark::State& state) { RunCommands(state, AbsNode(), 36); }
 BENCHMARK(BM_MppiAbsNode)
-    ->Args({20, 1})->Args({20, 2})->Args({30, 1})->Args({30, 2})
+    ->Args({20, 1, 0})->Args({20, 2, 0})->Args({30, 1, 0})->Args({30, 2, 0})
     ->UseRealTime()->MeasureProcessCPUTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 void BM_MppiResNn(benchmark::State& state) { RunCommands(state, ResNn(), 1); }
 BENCHMARK(BM_MppiResNn)
-    ->Args({30, 1})->Args({30, 2})
+    ->Args({30, 1, 0})->Args({30, 2, 0})
     ->UseRealTime()->MeasureProcessCPUTime()->Unit(benchmark::kMillisecond)->MinTime(0.5);
+
+void BM_MppiChunks(benchmark::State& state) { RunCommands(state, AbsNode(), 36); }
+BENCHMARK(BM_MppiChunks)
+    ->Args({20, 2, 250})->Args({20, 2, 500})
+    ->UseRealTime()->MeasureProcessCPUTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 void BM_PeakDgemm2Threads(benchmark::State& state) { bench::PeakDgemm2Threads(state); }
 BENCHMARK(BM_PeakDgemm2Threads)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/parallel.h"
@@ -13,7 +14,7 @@ namespace diffdyn {
 // Per-chunk buffers: states, actions and the model's workspace, sized once.
 struct Mppi::ChunkScratch {
   Eigen::MatrixXd states, next, actions;
-  Eigen::VectorXd standard_normal;  // m
+  Eigen::VectorXd standard_normal;  // m x width x T normals of one command
   std::unique_ptr<TransitionWorkspace> workspace;
 };
 
@@ -77,7 +78,7 @@ Mppi::Mppi(const TransitionModel& model, const MppiCost& cost, MppiOptions optio
     s->states.resize(n_, width);
     s->next.resize(n_, width);
     s->actions.resize(m_, width);
-    s->standard_normal.resize(m_);
+    s->standard_normal.resize(Eigen::Index(m_) * width * o.horizon);
     s->workspace = model_.MakeWorkspace(width);
     scratch_.push_back(std::move(s));
   }
@@ -108,23 +109,48 @@ void Mppi::Reset() {
 void Mppi::RolloutChunk(int chunk, int begin, int end, const Eigen::VectorXd& x) {
   ChunkScratch& s = *scratch_[chunk];
   const int width = end - begin;
+  const int m = m_;
+  // All standard normals of the chunk at once, by Box-Muller pairs (both outputs used).
   Rng rng(MixSeed(seed_, commands_, static_cast<std::uint64_t>(chunk)));
-  Eigen::VectorXd& e = s.standard_normal;
+  double* z = s.standard_normal.data();
+  const Eigen::Index count = s.standard_normal.size();
+  for (Eigen::Index i = 0; i < count; i += 2) {
+    const double u1 = 1.0 - UniformUnit(rng);  // in (0, 1]
+    const double u2 = UniformUnit(rng);
+    const double r = std::sqrt(-2.0 * std::log(u1));
+    const double a = 2.0 * std::numbers::pi * u2;
+    z[i] = r * std::cos(a);
+    if (i + 1 < count) z[i + 1] = r * std::sin(a);
+  }
+  const bool lower = options_.u_min.size() == m, upper = options_.u_max.size() == m;
+  const double* chol = chol_.data();  // column-major, lower triangular
   s.states.colwise() = x;
   auto costs = costs_.segment(begin, width);
   costs.setZero();
   for (int t = 0; t < options_.horizon; ++t) {
-    // Perturb, clamp, and keep the perturbation that survived the clamp.
-    auto eps = noise_[t].middleCols(begin, width);
+    // Perturb (eps = L e), clamp, keep the perturbation that survived the clamp, and
+    // add the perturbation cost u_t^T lambda Sigma^-1 eps.
+    double* eps = noise_[t].data() + Eigen::Index(begin) * m;
+    const double* u = nominal_.col(t).data();
+    const double* wu = weighted_nominal_.col(t).data();
+    const double* e_t = z + Eigen::Index(t) * width * m;
     for (int k = 0; k < width; ++k) {
-      for (int d = 0; d < m_; ++d) e[d] = StandardNormal(rng);
-      s.actions.col(k).noalias() = chol_ * e;
+      const double* e = e_t + Eigen::Index(k) * m;
+      double* a = s.actions.col(k).data();
+      double perturbation_cost = 0;
+      for (int i = 0; i < m; ++i) {
+        double v = 0;
+        for (int j = 0; j <= i; ++j) v += chol[i + j * m] * e[j];
+        v += u[i];
+        if (lower) v = std::max(v, options_.u_min[i]);
+        if (upper) v = std::min(v, options_.u_max[i]);
+        a[i] = v;
+        eps[Eigen::Index(k) * m + i] = v - u[i];
+        perturbation_cost += wu[i] * (v - u[i]);
+      }
+      costs[k] += perturbation_cost;
     }
-    s.actions.colwise() += nominal_.col(t);
-    Clamp(s.actions);
-    eps = s.actions.colwise() - nominal_.col(t);
-    // Perturbation cost u_t^T lambda Sigma^-1 eps, then the step and its running cost.
-    costs.noalias() += eps.transpose() * weighted_nominal_.col(t);
+    // The step and its running cost.
     model_.PredictBatch(s.states, s.actions, s.next, *s.workspace);
     cost_.Accumulate(s.next, costs);
     s.states.swap(s.next);
@@ -161,7 +187,10 @@ Eigen::VectorXd Mppi::Command(const Eigen::Ref<const Eigen::VectorXd>& x_in) {
   weights_ /= weights_.sum();
 
   // 5. Update the nominal sequence.
+  // u_t + sum_k w_k eps_k is a convex combination of clamped actions; clamping again
+  // only removes rounding (a push length of -3e-20, say).
   for (int t = 0; t < T; ++t) nominal_.col(t).noalias() += noise_[t] * weights_;
+  Clamp(nominal_);
   return nominal_.col(0);
 }
 

@@ -15,6 +15,7 @@
 //   diffdyn::Mppi mppi(model, cost, options, seed);
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 
@@ -77,11 +78,22 @@ class PushingCost : public MppiCost {
       const double dx = states(0, b) - goal_.x(), dy = states(1, b) - goal_.y(),
                    dt = states(2, b) - goal_.z();
       costs[b] += dx * dx + dy * dy + 0.1 * dt * dt;
-      if (obstacle_ && InCollision(states.col(b))) costs[b] += collision_weight_;
+      if (obstacle_ && NearObstacle(states(0, b), states(1, b)) && InCollision(states.col(b))) {
+        costs[b] += collision_weight_;
+      }
     }
   }
 
  private:
+  // False when the block's circumscribed circle misses the obstacle (then they are
+  // apart and the exact test, with its trigonometry, is skipped).
+  bool NearObstacle(double x, double y) const {
+    const Rectangle o = Obstacle();
+    const double ox = std::max(std::abs(x - o.center.x()) - o.half_size.x(), 0.0);
+    const double oy = std::max(std::abs(y - o.center.y()) - o.half_size.y(), 0.0);
+    return ox * ox + oy * oy < 2 * block_half_ * block_half_;
+  }
+
   Eigen::Vector3d goal_;
   bool obstacle_;
   double collision_weight_;
