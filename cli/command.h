@@ -47,5 +47,6 @@ void RegisterDemoCommand(CLI::App& app);
 void RegisterCollectCommand(CLI::App& app);
 void RegisterTrainCommand(CLI::App& app);
 void RegisterEvalCommand(CLI::App& app);
+void RegisterPushCommand(CLI::App& app);
 
 }  // namespace diffdyn::cli

@@ -9,6 +9,7 @@ void RegisterCommands(CLI::App& app) {
   RegisterDiagnoseCommand(app);
   RegisterEvalCommand(app);
   RegisterInfoCommand(app);
+  RegisterPushCommand(app);
   RegisterTrainCommand(app);
 }
 
