@@ -822,12 +822,152 @@ DiagnosisResult DiagnoseAtCutoff(std::shared_ptr<const AnalyticModel> model,
     }
   }
 
+  // ---- free motion: dissipation from the energy balance ----
+  // Without input torque, a conservative mismatch (inertia, lengths) dominates
+  // the torque residual but does no net work, while dissipation drains energy
+  // steadily. Over windows w of the training rows the work the extended model
+  // leaves unexplained, y_w = int_w qd . (tau - tau_hat) dt, is regressed on
+  // x_wj = int_w qd_j^2 dt (viscous j) by forward selection with the same
+  // EBIC and blocked cross-validation over windows; a coefficient b_j > 0
+  // (dissipative) is named viscous j with its regression standard error.
+  if (!data.has_tau && (options.kinds.empty() || wanted(EffectKind::kViscous))) {
+    const Eigen::MatrixXd pred = PredictAll(ctx, extended);
+    std::vector<double> y;
+    std::vector<Eigen::VectorXd> x;
+    double acc = 0, start_t = sd.t[sd.rows[ctx.train.front()]];
+    Eigen::VectorXd acc_x = Eigen::VectorXd::Zero(n);
+    for (std::size_t i = 1; i < ctx.train.size(); ++i) {
+      const int ra = ctx.train[i - 1], rb = ctx.train[i];
+      const int ka = sd.rows[ra], kb = sd.rows[rb];
+      if (sd.segment_of[ka] != sd.segment_of[kb]) {
+        acc = 0;
+        acc_x.setZero();
+        start_t = sd.t[kb];
+        continue;
+      }
+      const double dt = sd.t[kb] - sd.t[ka];
+      acc += 0.5 * dt * (sd.qd.col(ka).dot(ctx.tau.col(ra) - pred.col(ra)) +
+                         sd.qd.col(kb).dot(ctx.tau.col(rb) - pred.col(rb)));
+      acc_x += 0.5 * dt * (sd.qd.col(ka).array().square() + sd.qd.col(kb).array().square()).matrix();
+      if (sd.t[kb] - start_t >= options.energy_window) {
+        y.push_back(acc);
+        x.push_back(acc_x);
+        acc = 0;
+        acc_x.setZero();
+        start_t = sd.t[kb];
+      }
+    }
+    const int windows = static_cast<int>(y.size());
+    if (windows >= 2 * options.folds) {
+      const Eigen::VectorXd yv = Eigen::Map<const Eigen::VectorXd>(y.data(), windows);
+      Eigen::MatrixXd xm(windows, n);
+      for (int w = 0; w < windows; ++w) xm.row(w) = x[w].transpose();
+      auto fit = [&](const std::vector<int>& set, const std::vector<int>& rows_used) {
+        Eigen::MatrixXd a(rows_used.size(), set.size());
+        Eigen::VectorXd b(rows_used.size());
+        for (std::size_t r = 0; r < rows_used.size(); ++r) {
+          for (std::size_t c = 0; c < set.size(); ++c) a(r, c) = xm(rows_used[r], set[c]);
+          b[r] = yv[rows_used[r]];
+        }
+        return Eigen::VectorXd(a.colPivHouseholderQr().solve(b));
+      };
+      auto sse_of = [&](const std::vector<int>& set, const Eigen::VectorXd& beta, const std::vector<int>& rows_used) {
+        double sse = 0;
+        for (int r : rows_used) {
+          double p = 0;
+          for (std::size_t c = 0; c < set.size(); ++c) p += beta[c] * xm(r, set[c]);
+          sse += (yv[r] - p) * (yv[r] - p);
+        }
+        return sse;
+      };
+      std::vector<int> all(windows);
+      std::iota(all.begin(), all.end(), 0);
+      auto ebic = [&](const std::vector<int>& set) {
+        const double sse = set.empty() ? yv.squaredNorm() : sse_of(set, fit(set, all), all);
+        return windows * std::log(sse / windows + 1e-300) + set.size() * std::log(windows) +
+               2.0 * LogBinomial(n, static_cast<int>(set.size()));
+      };
+      auto cv = [&](const std::vector<int>& set) {
+        double total = 0;
+        for (int f = 0; f < options.folds; ++f) {
+          const int a = f * windows / options.folds, b = (f + 1) * windows / options.folds;
+          std::vector<int> train_w, test_w;
+          for (int w = 0; w < windows; ++w) (w >= a && w < b ? test_w : train_w).push_back(w);
+          if (set.empty()) {
+            total += sse_of(set, Eigen::VectorXd(), test_w);
+          } else {
+            total += sse_of(set, fit(set, train_w), test_w);
+          }
+        }
+        return total;
+      };
+      std::vector<int> chosen;
+      while (static_cast<int>(chosen.size()) < n) {
+        int best = -1;
+        double best_ebic = 0;
+        for (int j = 0; j < n; ++j) {
+          if (std::find(chosen.begin(), chosen.end(), j) != chosen.end()) continue;
+          bool has_friction = false;
+          for (const Effect& e : extended.effects()) {
+            has_friction = has_friction || (e.joint == j + 1 && (IsFriction(e.kind) || e.kind == EffectKind::kViscous));
+          }
+          if (has_friction) continue;
+          std::vector<int> set = chosen;
+          set.push_back(j);
+          const double e = ebic(set);
+          if (best < 0 || e < best_ebic) {
+            best = j;
+            best_ebic = e;
+          }
+        }
+        if (best < 0) break;
+        std::vector<int> set = chosen;
+        set.push_back(best);
+        SelectionStep step;
+        step.candidate = StrCat("viscous j", best + 1, " (energy balance over ", windows, " windows)");
+        step.ebic_before = ebic(chosen);
+        step.ebic_after = best_ebic;
+        step.cv_before = cv(chosen);
+        step.cv_after = cv(set);
+        step.contribution_to_noise = std::numeric_limits<double>::infinity();
+        const Eigen::VectorXd beta = fit(set, all);
+        if (step.ebic_after >= step.ebic_before) {
+          step.reason = "no dissipation lowers the information criterion";
+        } else if (step.cv_after >= step.cv_before) {
+          step.reason = "held-out (cross-validated) error does not fall";
+        } else if (beta[set.size() - 1] <= 0) {
+          step.reason = "not dissipative (b <= 0)";
+        } else {
+          step.accepted = true;
+          step.reason = "accepted";
+        }
+        result.steps.push_back(step);
+        if (!step.accepted) break;
+        chosen = set;
+      }
+      if (!chosen.empty()) {
+        const Eigen::VectorXd beta = fit(chosen, all);
+        Eigen::MatrixXd a(windows, chosen.size());
+        for (std::size_t c = 0; c < chosen.size(); ++c) a.col(c) = xm.col(chosen[c]);
+        const double s2 = sse_of(chosen, beta, all) / std::max(1, windows - static_cast<int>(chosen.size()));
+        const Eigen::MatrixXd cov = Eigen::MatrixXd(a.transpose() * a).inverse() * s2;
+        std::vector<Effect> effects_all = extended.effects();
+        for (std::size_t c = 0; c < chosen.size(); ++c) {
+          effects_all.push_back({EffectKind::kViscous, chosen[c] + 1, {beta[c]}, {std::sqrt(cov(c, c))}});
+        }
+        extended = ExtendedModel(model, ctx.params, effects_all);
+      }
+    }
+  }
+
   // ---- learned residuals ----
   auto inputs_of = [&](const std::vector<int>& idx) {
     Eigen::MatrixXd x(3 * n, idx.size());
     for (std::size_t i = 0; i < idx.size(); ++i) {
       const int k = sd.rows[idx[i]];
-      x.col(i) << sd.q.col(k), sd.qd.col(k), sd.qdd.col(k);
+      // qdd left out (zeros): a residual r(q, qd) keeps the extended mass
+      // matrix the physical one, so forward dynamics stays well posed.
+      x.col(i) << sd.q.col(k), sd.qd.col(k), Eigen::VectorXd::Zero(n);
     }
     return x;
   };
@@ -1106,6 +1246,17 @@ DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen
   // does not leak into tau - smooth(tau).
   const Eigen::VectorXd tau_noise = SmoothJointData(data, kMaxCutoffHz).tau_noise;
   if (options.cutoff_hz > 0) return DiagnoseAtCutoff(model, params, data, options, tau_noise, nullptr);
+  // Calibrated nominal parameters change with the cutoff, so the scores below
+  // would compare different nominal models: such runs keep the highest cutoff.
+  if (!options.fit_params.empty() || !options.scale_params.empty()) {
+    DiagnosisOptions at = options;
+    at.cutoff_hz = kMaxCutoffHz;
+    DiagnosisResult result = DiagnoseAtCutoff(model, params, data, at, tau_noise, nullptr);
+    result.notes.insert(result.notes.begin(),
+                        StrCat("cutoff ", kMaxCutoffHz, " Hz: nominal parameters are calibrated, so "
+                               "cutoffs (whose nominal models differ) are not compared"));
+    return result;
+  }
   // Automatic cutoff: the selection stage at each cutoff of the grid, scored by
   // the cross-validated SSE fraction its named effects remove on the training
   // rows; the highest cutoff within kCutoffTolerance of the best score wins.

@@ -136,9 +136,13 @@ JointData ReadIbmRun(const fs::path& file) {
   double prev1 = 0, prev2 = 0;
   for (int k = 0; k < count; ++k) {
     const auto& r = rows[k];
-    // Image y points down, so hanging down is +y: angle from hanging down.
-    const double phi1 = std::atan2(r[2] - r[0], r[3] - r[1]);
-    const double phi2 = std::atan2(r[4] - r[2], r[5] - r[3]);
+    // The camera is turned: gravity points along +x in the image (the
+    // pendulum comes to rest with the bobs at larger x than the pivot), so an
+    // absolute angle measured from +x is the angle from hanging down. Both
+    // angles share one handedness, so the free motion obeys the same equations
+    // whichever way the image is mirrored.
+    const double phi1 = std::atan2(r[3] - r[1], r[2] - r[0]);
+    const double phi2 = std::atan2(r[5] - r[3], r[4] - r[2]);
     double a1 = phi1, a2 = phi2 - phi1;
     // Unwrap against the previous sample.
     if (k > 0) {

@@ -5,7 +5,9 @@
 //
 //   r(x) = W2 tanh(W1 s + b1) + b2          (W1: H x 3n, W2: n x H),
 //
-// gives n joint torques. The hidden layer is drawn once from a seed (random
+// gives n joint torques. An input that is constant in the training data (the
+// diagnosis passes qdd = 0, so the residual depends on (q, qd) only and cannot
+// make the extended mass matrix indefinite) gets zero weights. The hidden layer is drawn once from a seed (random
 // features, W1 ~ N(0, 1/3n)) and only the output layer is learned, by ridge
 // regression on the residual torques:
 //
@@ -87,6 +89,11 @@ struct ResidualNetwork {
     for (int k = 0; k < hidden; ++k) {
       for (int i = 0; i < d; ++i) net.w1(k, i) = w_scale * StandardNormal(rng);
       net.b1[k] = StandardNormal(rng);
+    }
+    // A constant input (e.g. qdd given as zeros) is left out: its weights are
+    // zeroed, so the network does not depend on it at all.
+    for (int i = 0; i < d; ++i) {
+      if (net.in_scale[i] <= 2e-9) net.w1.col(i).setZero();
     }
     // Hidden features of every sample, with a constant row for b2.
     const Eigen::MatrixXd s =

@@ -35,8 +35,9 @@
 // run at each, scored by the blocked cross-validated fraction of the nominal
 // residual SSE its effects remove on the training rows, and the highest
 // cutoff scoring within kCutoffTolerance of the best is used (the held-out
-// rows are never looked at). The torque-noise estimate always comes from the
-// 10 Hz smoothing.
+// rows are never looked at). With calibrated nominal parameters (fit_params,
+// scale_params) the nominal model itself would change with the cutoff, so
+// 10 Hz is kept. The torque-noise estimate always comes from the 10 Hz smoothing.
 //
 // Refit. The selected effects' parameters are refitted jointly through the
 // extended model (Ceres, Jets of JointTorque; delay through interpolation of

@@ -12,8 +12,9 @@
 //   panda_gaz2019_traj1/   exciting_traj_{time,positions,velocity,torques}.txt
 //                          (7 lines per sample), tau = link-side sensor torque;
 //   ibm_double_pendulum/   headerless runs of pixel markers (pivot, bob 1,
-//                          bob 2); angles q1 = atan2(dx1, dy1) from hanging
-//                          down (image y points down), q2 relative, unwrapped;
+//                          bob 2); angles q1 = atan2(dy1, dx1) from hanging
+//                          down (gravity points along image +x: the camera
+//                          is turned), q2 relative, unwrapped;
 //                          400 Hz, tau = 0, qd estimated (has_qd = false);
 //                          a folder reads run 0.csv, a file reads that run;
 //   delan_characters/      character_data.csv: one segment per character.
