@@ -146,9 +146,28 @@ void ExpectFound(const std::string& model, EffectKind kind, std::uint64_t seed, 
 TEST(Diagnosis, FindsHiddenCoulombOnPendulum) { ExpectFound("pendulum", EffectKind::kCoulomb, 1); }
 TEST(Diagnosis, FindsHiddenPayloadOnPendulum) { ExpectFound("pendulum", EffectKind::kPayload, 2); }
 TEST(Diagnosis, FindsHiddenViscousOnCartPole) { ExpectFound("cartpole", EffectKind::kViscous, 3); }
-// Known gap: the delay is named with the right magnitude, but its held-out gain
-// here is about 0.2, below the 0.5 of the acceptance criterion (reported).
-TEST(Diagnosis, FindsHiddenDelayOnCartPole) { ExpectFound("cartpole", EffectKind::kDelay, 4, 0.1); }
+TEST(Diagnosis, FindsHiddenDelayOnCartPole) { ExpectFound("cartpole", EffectKind::kDelay, 4); }
+
+// On the cart, velocity noise differentiated at 10 Hz swamps the effect in the
+// residual (its torque is mostly inertia); the chosen cutoff goes lower and the
+// gain follows. Without velocity noise the 10 Hz cutoff is kept.
+TEST(Diagnosis, ChoosesALowerCutoffWhenDifferentiatedVelocityNoiseDominates) {
+  HiddenEffectOptions options;
+  options.kinds = {EffectKind::kDelay};
+  const auto m = MakeAnalyticModel("cartpole");
+  const HiddenEffectCase noisy = GenerateHiddenEffectCase("cartpole", 4, false, options);
+  DiagnosisOptions fixed;
+  fixed.cutoff_hz = kMaxCutoffHz;
+  const DiagnosisResult at10 = Diagnose(m, m->DefaultParams(), noisy.data, fixed);
+  const DiagnosisResult chosen = Diagnose(m, m->DefaultParams(), noisy.data, DiagnosisOptions{});
+  EXPECT_LT(chosen.cutoff_hz, kMaxCutoffHz);
+  EXPECT_GT(chosen.heldout_sse_removed, at10.heldout_sse_removed + 0.2);
+  options.qd_noise = 0.0;
+  const HiddenEffectCase clean = GenerateHiddenEffectCase("cartpole", 4, false, options);
+  const DiagnosisResult r = Diagnose(m, m->DefaultParams(), clean.data, DiagnosisOptions{});
+  EXPECT_EQ(r.cutoff_hz, kMaxCutoffHz);
+  EXPECT_GE(r.heldout_sse_removed, 0.9);
+}
 TEST(Diagnosis, FindsHiddenFrictionOnPanda) { ExpectFound("panda", EffectKind::kCoulomb, 5); }
 
 TEST(Diagnosis, NamesNothingWithoutAnEffect) {
@@ -159,6 +178,33 @@ TEST(Diagnosis, NamesNothingWithoutAnEffect) {
     EXPECT_TRUE(r.no_significant_discrepancy) << model << ": named " << r.named_effects.size();
     EXPECT_TRUE(r.named_effects.empty());
   }
+}
+
+// The real IBM double pendulum (free motion, pixels): lengths from the marker
+// distances, mass ratio and scale fitted on the first quarter; dissipation is
+// named and both the energy-balance error and the 0.1 s rollout error drop.
+TEST(Diagnosis, NamesDissipationOnTheRealDoublePendulum) {
+  const JointData data = ReadMeasured(std::string(DIFFDYN_SHARED_DATA_DIR) + "/ibm_double_pendulum");
+  const auto m = MakeAnalyticModel("double-pendulum");
+  Eigen::VectorXd p = m->DefaultParams();
+  p[m->ParamIndex("l1")] = 1.0;
+  p[m->ParamIndex("l2")] = data.link_lengths_px[1] / data.link_lengths_px[0];
+  DiagnosisOptions options;
+  options.fit_params = {"m2"};
+  options.scale_params = {"l1", "l2"};
+  const DiagnosisResult r = Diagnose(m, p, data, options);
+  bool dissipation = false;
+  for (const Effect& e : r.named_effects) {
+    dissipation = dissipation || ((e.kind == EffectKind::kViscous || e.kind == EffectKind::kCoulomb ||
+                                   e.kind == EffectKind::kStribeck) && e.params[0] > 0);
+  }
+  EXPECT_TRUE(dissipation);
+  EXPECT_LT(r.energy_error_extended, r.energy_error_nominal);
+  EXPECT_LT(r.rollout_q_extended.norm(), r.rollout_q_nominal.norm());
+  // The fitted scale gives a physical first link (the real one is about 0.2 m).
+  const double l1 = r.nominal_params[m->ParamIndex("l1")];
+  EXPECT_GT(l1, 0.05);
+  EXPECT_LT(l1, 0.5);
 }
 
 TEST(Diagnosis, RejectsMismatchedModel) {
