@@ -300,6 +300,45 @@ TEST(Mlp, ResultsIdenticalAtAnyThreadCount) {
   EXPECT_LT((grad - reference).cwiseAbs().maxCoeff(), 1e-10 * reference.cwiseAbs().maxCoeff());
 }
 
+TEST(Mlp, AccumulatingBackwardAddsTheSameGradient) {
+  Rng rng(47);
+  MlpArchitecture arch{{6, 30, 20, 6}, {Activation::Relu(), Activation::Relu()}};
+  const Mlp<double> net(arch, RandomVector(arch.num_parameters(), 0.3, rng));
+  const int batch = 90;
+  const Eigen::MatrixXd X = RandomMatrix(6, batch, 1.0, rng);
+  const Eigen::MatrixXd gy = RandomMatrix(6, batch, 1.0, rng);
+  const Eigen::VectorXd start = RandomVector(arch.num_parameters(), 1.0, rng);
+  // One chunk (written in place) and three chunks (summed slots), at 1 and 2 threads.
+  for (int chunk : {batch, 32}) {
+    for (int threads : {1, 2}) {
+      MlpWorkspace ws(arch, batch, chunk, false);
+      Eigen::MatrixXd Y, gx, gx_acc;
+      Eigen::VectorXd grad;
+      net.Forward(X, &Y, nullptr, &ws, threads);
+      net.Backward(gy, Eigen::MatrixXd(), &grad, &gx, &ws, threads);
+      Eigen::VectorXd acc = start;
+      net.Backward(gy, Eigen::MatrixXd(), &acc, nullptr, &ws, threads, /*accumulate=*/true);
+      EXPECT_LT((acc - start - grad).cwiseAbs().maxCoeff(),
+                1e-12 * (1.0 + grad.cwiseAbs().maxCoeff()))
+          << "chunk " << chunk << ", " << threads << " threads";
+      // BackwardAccumulate into a segment of a longer vector, gy through a Ref.
+      Eigen::VectorXd longer = Eigen::VectorXd::Zero(arch.num_parameters() + 5);
+      longer.head(arch.num_parameters()) = start;
+      net.BackwardAccumulate(gy, longer.head(arch.num_parameters()), &gx_acc, &ws, threads);
+      EXPECT_LT((longer.head(arch.num_parameters()) - acc).cwiseAbs().maxCoeff(),
+                1e-12 * (1.0 + acc.cwiseAbs().maxCoeff()));
+      EXPECT_TRUE(longer.tail(5).isZero(0.0));
+      EXPECT_TRUE(gx_acc == gx);
+    }
+  }
+  // Accumulating into a vector of the wrong size is an error, not a resize.
+  MlpWorkspace ws(arch, batch, batch, false);
+  Eigen::MatrixXd Y;
+  net.Forward(X, &Y, nullptr, &ws);
+  Eigen::VectorXd wrong = Eigen::VectorXd::Zero(3);
+  EXPECT_THROW(net.Backward(gy, Eigen::MatrixXd(), &wrong, nullptr, &ws, 1, true), Error);
+}
+
 TEST(Mlp, WorkspaceReuseAcrossBatchSizes) {
   Rng rng(51);
   const Mlp<double> net = SmallNet(Activation::Softplus(), 16);

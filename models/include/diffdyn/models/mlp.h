@@ -150,12 +150,11 @@ class MlpWorkspace {
   // Buffers of one chunk of at most `chunk_size_` samples.
   struct Chunk {
     std::vector<Eigen::MatrixXd> h;    // h_l, n_l x cap, l = 0 .. L-1
-    std::vector<Eigen::MatrixXd> a;    // a_l, n_{l+1} x cap (output layer unused)
     std::vector<Eigen::MatrixXd> dg;   // g'(a_l), hidden layers
     std::vector<Eigen::MatrixXd> ddg;  // g''(a_l), hidden layers (Jacobian mode)
     std::vector<Eigen::MatrixXd> u;    // U_l, n_{l+1} x n_0 cap (Jacobian mode)
     std::vector<Eigen::MatrixXd> z;    // Z_l, n_l x n_0 cap, l >= 1 (Jacobian mode)
-    Eigen::MatrixXd abar[2], hbar, dbar, ubar[2], zbar;
+    Eigen::MatrixXd abar[2], dbar, ubar[2], zbar;
     Eigen::VectorXd grad;
     int count = 0;                 // samples in this chunk after the last Forward
     bool has_jacobian = false;     // whether the last Forward built the chain
@@ -168,16 +167,11 @@ class MlpWorkspace {
       const int n0 = arch.num_inputs();
       const int width = arch.max_width();
       h.resize(layers);
-      a.resize(layers);
-      dg.resize(layers);
-      for (int l = 0; l < layers; ++l) {
-        h[l].resize(arch.sizes[l], cap);
-        a[l].resize(arch.sizes[l + 1], cap);
-        dg[l].resize(arch.sizes[l + 1], cap);
-      }
+      dg.resize(layers - 1);
+      for (int l = 0; l < layers; ++l) h[l].resize(arch.sizes[l], cap);
+      for (int l = 0; l + 1 < layers; ++l) dg[l].resize(arch.sizes[l + 1], cap);
       abar[0].resize(width, cap);
       abar[1].resize(width, cap);
-      hbar.resize(width, cap);
       grad.resize(arch.num_parameters());
       if (jacobian) {
         ddg.resize(layers);
@@ -191,10 +185,12 @@ class MlpWorkspace {
         dbar.resize(width, cap);
         zbar.resize(width, Eigen::Index(n0) * cap);
       }
-      // ubar also holds the n_L stacked sweeps of InputJacobianReverse.
-      const Eigen::Index sweeps = Eigen::Index(std::max(n0, arch.num_outputs())) * cap;
-      ubar[0].resize(width, sweeps);
-      ubar[1].resize(width, sweeps);
+      // ubar (the Jacobian cotangents) also holds the n_L stacked sweeps of
+      // InputJacobianReverse, which sizes it on first use.
+      if (jacobian) {
+        ubar[0].resize(width, Eigen::Index(n0) * cap);
+        ubar[1].resize(width, Eigen::Index(n0) * cap);
+      }
       allocated_cap = cap;
       allocated_jacobian = jacobian;
     }
@@ -406,40 +402,37 @@ class Mlp {
   /// gy = dL/dY (n_L x B, or empty for none) and gjac = dL/dJ (n_L x n_0 B in
   /// the layout of Forward's J, or empty for none; needs Forward with J), writes
   /// grad_params = dL/dtheta (num_parameters(), summed over the batch) and, if
-  /// not null, grad_inputs = dL/dX (n_0 x B). Either output may be null.
+  /// not null, grad_inputs = dL/dX (n_0 x B). Either output may be null. With
+  /// `accumulate`, grad_params (already of size num_parameters()) is added to
+  /// instead of overwritten.
   void Backward(const Eigen::MatrixXd& gy, const Eigen::MatrixXd& gjac,
                 Eigen::VectorXd* grad_params, Eigen::MatrixXd* grad_inputs, MlpWorkspace* ws,
-                int threads = 1) const
+                int threads = 1, bool accumulate = false) const
     requires std::is_same_v<T, double>
   {
-    DIFFDYN_CHECK(ws != nullptr, "Mlp::Backward needs a workspace");
-    const int batch = ws->batch_;
-    const int n0 = num_inputs();
-    const bool has_gy = gy.size() > 0;
-    const bool has_gj = gjac.size() > 0;
-    DIFFDYN_CHECK(!has_gy || (gy.rows() == num_outputs() && gy.cols() == batch),
-                  "Mlp::Backward: output cotangent is ", gy.rows(), " x ", gy.cols(),
-                  ", expected ", num_outputs(), " x ", batch);
-    DIFFDYN_CHECK(!has_gj || (gjac.rows() == num_outputs() &&
-                              gjac.cols() == Eigen::Index(n0) * batch),
-                  "Mlp::Backward: Jacobian cotangent is ", gjac.rows(), " x ", gjac.cols(),
-                  ", expected ", num_outputs(), " x ", Eigen::Index(n0) * batch);
-    DIFFDYN_CHECK(!has_gj || batch == 0 || ws->chunks_[0].has_jacobian,
-                  "Mlp::Backward: a Jacobian cotangent needs Forward with a Jacobian");
-    if (grad_inputs && (grad_inputs->rows() != n0 || grad_inputs->cols() != batch)) {
-      grad_inputs->resize(n0, batch);
-    }
-    const int chunks = NumChunks(batch, ws->chunk_size());
-    ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
-      BackwardChunk(has_gy ? &gy : nullptr, has_gj ? &gjac : nullptr, begin, end - begin,
-                    grad_params != nullptr, grad_inputs, &ws->chunks_[c]);
-    });
-    // Chunk gradients summed in chunk order: identical at any thread count.
     if (grad_params) {
+      DIFFDYN_CHECK(!accumulate || grad_params->size() == num_parameters(),
+                    "Mlp::Backward: accumulating into a gradient of size ", grad_params->size(),
+                    ", expected ", num_parameters());
       if (grad_params->size() != num_parameters()) grad_params->resize(num_parameters());
-      grad_params->setZero();
-      for (int c = 0; c < chunks; ++c) *grad_params += ws->chunks_[c].grad;
     }
+    BackwardImpl(gy, gjac, grad_params ? grad_params->data() : nullptr, accumulate, grad_inputs,
+                 ws, threads);
+  }
+
+  /// Backward with an output cotangent only, adding dL/dtheta to grad_params
+  /// (size num_parameters(), e.g. a segment of a larger vector) and writing
+  /// dL/dX to grad_inputs (may be null). No copies of gy; for ODE adjoints that
+  /// sum the parameter gradient over many evaluations.
+  void BackwardAccumulate(const Eigen::Ref<const Eigen::MatrixXd>& gy,
+                          Eigen::Ref<Eigen::VectorXd> grad_params, Eigen::MatrixXd* grad_inputs,
+                          MlpWorkspace* ws, int threads = 1) const
+    requires std::is_same_v<T, double>
+  {
+    DIFFDYN_CHECK(grad_params.size() == num_parameters(), "Mlp::BackwardAccumulate: gradient has ",
+                  grad_params.size(), " entries, expected ", num_parameters());
+    static const Eigen::MatrixXd kNone;
+    BackwardImpl(gy, kNone, grad_params.data(), true, grad_inputs, ws, threads);
   }
 
   /// Input Jacobians by batched reverse mode (n_L backward sweeps stacked into
@@ -462,6 +455,12 @@ class Mlp {
     ParallelForChunks(batch, cap, threads, [&](int c, int begin, int end) {
       MlpWorkspace::Chunk& ch = ws->chunks_[c];
       const int nb = end - begin;
+      const int width = arch_.max_width();
+      for (Eigen::MatrixXd& buffer : ch.ubar) {
+        if (buffer.rows() < width || buffer.cols() < Eigen::Index(m) * cap) {
+          buffer.resize(width, std::max(buffer.cols(), Eigen::Index(m) * cap));
+        }
+      }
       // The m sweeps of each sample side by side: column b*m + k is output k
       // of sample b (workspace buffers ubar hold max(n_0, n_L) cap columns).
       Eigen::MatrixXd* cur = &ch.ubar[0];
@@ -522,14 +521,17 @@ class Mlp {
     ch->h[0].leftCols(nb) = x;
     for (int l = 0; l < L; ++l) {
       const int rows = arch_.sizes[l + 1];
-      auto a = ch->a[l].leftCols(nb);
-      a.noalias() = W(l) * ch->h[l].leftCols(nb);
-      a.colwise() += b(l);
+      // a_l = b_l + W_l h_l, written where g(a_l) goes (activation in place), the
+      // bias broadcast first so the GEMM accumulates (no zeroing pass).
       if (l + 1 < L) {
-        ApplyActivation(arch_.activations[l], a.data(), a.size(), ch->h[l + 1].data(),
-                        ch->dg[l].data(), jac ? ch->ddg[l].data() : nullptr);
+        auto a = ch->h[l + 1].leftCols(nb);
+        a.colwise() = b(l);
+        a.noalias() += W(l) * ch->h[l].leftCols(nb);
+        ApplyActivation(arch_.activations[l], a.data(), a.size(), a.data(), ch->dg[l].data(),
+                        jac ? ch->ddg[l].data() : nullptr);
       } else {
-        y = a;
+        y.colwise() = b(l);
+        y.noalias() += W(l) * ch->h[l].leftCols(nb);
       }
       if (!jac) continue;
       // Jacobian chain: U_0 = W_0 per sample, U_l = W_l Z_l; Z_{l+1} = diag(g') U_l.
@@ -552,9 +554,52 @@ class Mlp {
   }
 
   // Reverse sweep over one chunk of nb samples starting at `begin`.
-  void BackwardChunk(const Eigen::MatrixXd* gy, const Eigen::MatrixXd* gjac, int begin, int nb,
-                     bool want_params, Eigen::MatrixXd* grad_inputs,
-                     MlpWorkspace::Chunk* ch) const {
+  // Backward / BackwardAccumulate: grad (num_parameters() entries, or null) is
+  // overwritten, or added to if `accumulate`.
+  template <typename GyMatrix>
+  void BackwardImpl(const GyMatrix& gy, const Eigen::MatrixXd& gjac, double* grad, bool accumulate,
+                    Eigen::MatrixXd* grad_inputs, MlpWorkspace* ws, int threads) const {
+    DIFFDYN_CHECK(ws != nullptr, "Mlp::Backward needs a workspace");
+    const int batch = ws->batch_;
+    const int n0 = num_inputs();
+    const bool has_gy = gy.size() > 0;
+    const bool has_gj = gjac.size() > 0;
+    DIFFDYN_CHECK(!has_gy || (gy.rows() == num_outputs() && gy.cols() == batch),
+                  "Mlp::Backward: output cotangent is ", gy.rows(), " x ", gy.cols(),
+                  ", expected ", num_outputs(), " x ", batch);
+    DIFFDYN_CHECK(!has_gj || (gjac.rows() == num_outputs() &&
+                              gjac.cols() == Eigen::Index(n0) * batch),
+                  "Mlp::Backward: Jacobian cotangent is ", gjac.rows(), " x ", gjac.cols(),
+                  ", expected ", num_outputs(), " x ", Eigen::Index(n0) * batch);
+    DIFFDYN_CHECK(!has_gj || batch == 0 || ws->chunks_[0].has_jacobian,
+                  "Mlp::Backward: a Jacobian cotangent needs Forward with a Jacobian");
+    if (grad_inputs && (grad_inputs->rows() != n0 || grad_inputs->cols() != batch)) {
+      grad_inputs->resize(n0, batch);
+    }
+    const Eigen::Index p = num_parameters();
+    const int chunks = NumChunks(batch, ws->chunk_size());
+    // One chunk writes straight into grad; several write their own slots.
+    const bool direct = chunks <= 1;
+    ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
+      MlpWorkspace::Chunk& ch = ws->chunks_[c];
+      BackwardChunk(has_gy ? &gy : nullptr, has_gj ? &gjac : nullptr, begin, end - begin,
+                    grad != nullptr, direct && grad ? grad : ch.grad.data(), direct && accumulate,
+                    grad_inputs, &ch);
+    });
+    if (grad == nullptr) return;
+    Eigen::Map<Eigen::VectorXd> g(grad, p);
+    if (!accumulate && (batch == 0 || !direct)) g.setZero();
+    // Chunk gradients summed in chunk order: identical at any thread count.
+    if (!direct) {
+      for (int c = 0; c < chunks; ++c) g += ws->chunks_[c].grad;
+    }
+  }
+
+  // Parameter gradients go to grad_out (num_parameters()), added if `accumulate`.
+  template <typename GyMatrix>
+  void BackwardChunk(const GyMatrix* gy, const Eigen::MatrixXd* gjac, int begin, int nb,
+                     bool want_params, double* grad_out, bool accumulate,
+                     Eigen::MatrixXd* grad_inputs, MlpWorkspace::Chunk* ch) const {
     const int L = arch_.num_layers();
     const int n0 = num_inputs();
     const Eigen::Index nz = Eigen::Index(n0) * nb;
@@ -573,10 +618,14 @@ class Mlp {
       const int cols = arch_.sizes[l];
       // Parameter gradients of layer l.
       if (want_params) {
-        Eigen::Map<Eigen::MatrixXd> gw(ch->grad.data() + arch_.WeightOffset(l), rows, cols);
-        Eigen::Map<Eigen::VectorXd> gb(ch->grad.data() + arch_.BiasOffset(l), rows);
-        gw.noalias() = abar(cur, rows) * ch->h[l].leftCols(nb).transpose();
-        gb = abar(cur, rows).rowwise().sum();
+        Eigen::Map<Eigen::MatrixXd> gw(grad_out + arch_.WeightOffset(l), rows, cols);
+        Eigen::Map<Eigen::VectorXd> gb(grad_out + arch_.BiasOffset(l), rows);
+        if (!accumulate) {
+          gw.setZero();
+          gb.setZero();
+        }
+        gw.noalias() += abar(cur, rows) * ch->h[l].leftCols(nb).transpose();
+        gb += abar(cur, rows).rowwise().sum();
         if (gjac) {
           if (l == 0) {
             for (int bb = 0; bb < nb; ++bb) gw += ubar(cur, rows).middleCols(Eigen::Index(bb) * n0, n0);
@@ -591,12 +640,11 @@ class Mlp {
         }
         break;
       }
-      // Cotangents of layer l-1: hbar = W^T abar; zbar = W^T ubar.
+      // Cotangents of layer l-1: abar' = (W^T abar) .* g'; zbar = W^T ubar.
       const int nxt = 1 - cur;
-      auto hbar = ch->hbar.topLeftCorner(cols, nb);
-      hbar.noalias() = W(l).transpose() * abar(cur, rows);
       auto next_abar = abar(nxt, cols);
-      next_abar = hbar.cwiseProduct(ch->dg[l - 1].leftCols(nb));
+      next_abar.noalias() = W(l).transpose() * abar(cur, rows);
+      next_abar.array() *= ch->dg[l - 1].leftCols(nb).array();
       if (gjac) {
         auto zbar = ch->zbar.topLeftCorner(cols, nz);
         zbar.noalias() = W(l).transpose() * ubar(cur, rows);

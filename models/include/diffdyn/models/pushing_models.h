@@ -145,9 +145,9 @@ struct PushingModelConfig {
 /// The MLP forward passes of one taped solve, kept so that the backward pass need not
 /// recompute them: entry k holds the input z and the MLP workspace (activations) of
 /// the k-th Eval since Start. At most 64 entries and `budget_bytes` of workspaces (an
-/// MLP workspace of B samples holds about 8 B (3 sum_l n_l + 2 w max(n_0, n_L)) bytes,
-/// w the widest layer: ~4 MB for h = 100, B = 250); later Evals are not kept and their
-/// Vjps recompute.
+/// MLP workspace of B samples holds about 8 B (2 sum_l n_l + 2 w) bytes, w the widest
+/// layer: ~1.3 MB for h = 100, B = 250); later Evals are not kept and their Vjps
+/// recompute.
 struct MlpForwardCache {
   std::vector<Eigen::MatrixXd> inputs;
   std::vector<MlpWorkspace> workspaces;
@@ -158,8 +158,7 @@ struct MlpForwardCache {
   /// Entries that fit the budget for batches of `batch` samples of `arch`.
   int Capacity(const MlpArchitecture& arch, int batch) const {
     const double sum = std::accumulate(arch.sizes.begin(), arch.sizes.end(), 0.0);
-    const double bytes =
-        8.0 * batch * (3 * sum + 2.0 * arch.max_width() * std::max(arch.num_inputs(), arch.num_outputs()));
+    const double bytes = 8.0 * batch * (2 * sum + 2.0 * arch.max_width());
     return static_cast<int>(std::min(64.0, budget_bytes / std::max(bytes, 1.0)));
   }
 
@@ -183,8 +182,7 @@ struct MlpOdeSystem {
   /// Buffers for one batch: the MLP's workspace plus input / output / gradient copies.
   struct Workspace {
     MlpWorkspace mlp;
-    Eigen::MatrixXd input, output, cotangent, grad_input;
-    Eigen::VectorXd grad_params;
+    Eigen::MatrixXd input, output, grad_input;
   };
 
   /// n = 6.
@@ -223,7 +221,6 @@ struct MlpOdeSystem {
   void Vjp(const Eigen::Ref<const Eigen::MatrixXd>& z, double,
            const Eigen::Ref<const Eigen::MatrixXd>& lambda, Eigen::Ref<Eigen::MatrixXd> vjp_z,
            Eigen::Ref<Eigen::VectorXd> grad_theta, Workspace& ws) const {
-    static const Eigen::MatrixXd kNone;
     constexpr int kSearch = 8;
     MlpWorkspace* forward = nullptr;
     if (cache) {
@@ -240,10 +237,9 @@ struct MlpOdeSystem {
       net->Forward(ws.input, &ws.output, nullptr, &ws.mlp);
       forward = &ws.mlp;
     }
-    ws.cotangent = lambda;
-    net->Backward(ws.cotangent, kNone, &ws.grad_params, &ws.grad_input, forward);
+    // dL/dtheta goes straight into grad_theta (the sum over the solver's stages).
+    net->BackwardAccumulate(lambda, grad_theta, &ws.grad_input, forward);
     vjp_z = ws.grad_input;
-    grad_theta += ws.grad_params;
   }
 };
 
