@@ -125,11 +125,32 @@ TEST(Cli, JsonSummaryIsOneLineObject) {
 
 namespace {
 
-TEST(Demo, QuickRunIdentifiesThePendulumAndWritesItsReport) {
+TEST(Demo, QuickRunExercisesEveryStageAndWritesItsReport) {
   const std::string out = testing::TempDir() + "/demo_quick";
   const Result r = RunDiffdyn("demo --quick --json --seed 4 --out " + out);
   ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(CountLines(r.out), 1) << r.out;
   const auto summary = nlohmann::json::parse(r.out);
+  // Stage 1: the quick run's 24 trajectories of up to 5 pushes.
+  const auto& collect = summary.at("collect");
+  EXPECT_EQ(collect.at("trajectories").get<int>(), 24);
+  EXPECT_GE(collect.at("pushes").get<int>(), 24);
+  EXPECT_LE(collect.at("pushes").get<int>(), 120);
+  // Stage 2: a trained model with finite losses, split 80/20.
+  const auto& train = summary.at("train");
+  EXPECT_TRUE(std::isfinite(train.at("final_train_loss").get<double>()));
+  EXPECT_TRUE(std::isfinite(train.at("final_val_loss").get<double>()));
+  EXPECT_EQ(train.at("n_train").get<int>() + train.at("n_val").get<int>(),
+            collect.at("pushes").get<int>());
+  // Stage 3: one trial, the push keys of DESIGN.md.
+  const auto& push = summary.at("push");
+  EXPECT_EQ(push.at("trials").get<int>(), 1);
+  for (const char* key : {"successes", "success_rate", "ci95_low", "ci95_high", "mean_pushes",
+                          "ms_per_command"}) {
+    EXPECT_TRUE(push.contains(key)) << key;
+  }
+  EXPECT_GE(push.at("mean_pushes").get<double>(), 1.0);
+  // Stage 4: the pendulum.
   const auto& fit = summary.at("pendulum_fit");
   EXPECT_TRUE(fit.at("converged").get<bool>());
   EXPECT_LT(fit.at("final_rms").get<double>(), fit.at("initial_rms").get<double>());
@@ -139,21 +160,52 @@ TEST(Demo, QuickRunIdentifiesThePendulumAndWritesItsReport) {
               0.05 * p.at("truth").get<double>())
         << p.dump();
   }
-  for (const char* file : {"report.md", "pendulum_fit.csv"}) {
+  for (const char* file : {"report.md", "pushes.csv", "abs-node.json", "training.csv",
+                           "push/trials.csv", "pendulum_fit.csv"}) {
     FILE* f = fopen((out + "/" + file).c_str(), "r");
     EXPECT_NE(f, nullptr) << file;
     if (f != nullptr) fclose(f);
   }
+  // The report names every stage, with a command that redoes it.
+  const std::string report = ReadFile(out + "/report.md");
+  for (const char* text : {"## 1. Data", "## 2. The absolute NeuralODE", "## 3. Pushing",
+                           "## 4. Identifying", "## Timings", "diffdyn collect --trajectories 24",
+                           "diffdyn train --data", "diffdyn push --model", "95 % Wilson"}) {
+    EXPECT_NE(report.find(text), std::string::npos) << text << " missing from\n" << report;
+  }
+}
+
+void ReplaceAll(std::string& text, const std::string& from, const std::string& to) {
+  for (std::size_t p = text.find(from); p != std::string::npos; p = text.find(from, p + to.size())) {
+    text.replace(p, from.size(), to);
+  }
+}
+
+// The report without its timings section.
+std::string ReportWithoutTimings(const std::string& report) {
+  return report.substr(0, report.find("## Timings"));
 }
 
 TEST(Demo, SameSeedSameBytes) {
   const std::string a = testing::TempDir() + "/demo_a", b = testing::TempDir() + "/demo_b";
-  ASSERT_EQ(RunDiffdyn("demo --quick --quiet --seed 11 --out " + a).exit_code, 0);
-  ASSERT_EQ(RunDiffdyn("demo --quick --quiet --seed 11 --out " + b).exit_code, 0);
-  const std::string first = ReadFile(a + "/pendulum_fit.csv");
-  EXPECT_FALSE(first.empty());
-  EXPECT_EQ(first, ReadFile(b + "/pendulum_fit.csv"));
-  EXPECT_EQ(ReadFile(a + "/report.md"), ReadFile(b + "/report.md"));
+  ASSERT_EQ(RunDiffdyn("demo --quick --quiet --seed 11 --threads 1 --out " + a).exit_code, 0);
+  ASSERT_EQ(RunDiffdyn("demo --quick --quiet --seed 11 --threads 2 --out " + b).exit_code, 0);
+  for (const char* file : {"pushes.csv", "abs-node.json", "training.csv", "push/trials.csv",
+                           "pendulum_fit.csv"}) {
+    // The model's provenance names its data file, inside the output folder.
+    std::string first = ReadFile(a + "/" + file), second = ReadFile(b + "/" + file);
+    ReplaceAll(first, a, "OUT");
+    ReplaceAll(second, b, "OUT");
+    EXPECT_FALSE(first.empty()) << file;
+    EXPECT_EQ(first, second) << file;
+  }
+  // Timings aside, the reports agree (the output folder's name appears in the commands).
+  std::string ra = ReportWithoutTimings(ReadFile(a + "/report.md"));
+  std::string rb = ReportWithoutTimings(ReadFile(b + "/report.md"));
+  ReplaceAll(ra, a, "OUT");
+  ReplaceAll(rb, b, "OUT");
+  EXPECT_FALSE(ra.empty());
+  EXPECT_EQ(ra, rb);
 }
 
 TEST(Demo, UnwritableOutputIsExitCode2) {
