@@ -1,7 +1,8 @@
 // diffdyn push: MPPI over a pushing model, executed in the ODE-engine world.
 //
 //   diffdyn push --model MODEL.json --trials 20 --obstacle --seed 1 --samples 1000
-//                --horizon 20 --max-steps 20 [--threads 0] [--out DIR] [--json]
+//                --horizon 20 --max-steps 20 [--collision-margin M] [--collision-substeps S]
+//                [--threads 0] [--out DIR] [--json]
 //
 // --model is a pushing model file or `oracle` (the ODE world itself as the model).
 // Prints the success rate with its 95 % Wilson interval, the mean number of pushes,
@@ -89,6 +90,8 @@ struct PushArgs {
   int max_steps = 20;
   int threads = 0;
   std::string out;
+  double collision_margin = PushTaskOptions{}.collision_margin;
+  int collision_substeps = PushTaskOptions{}.collision_substeps;
 };
 
 void RunPush(const PushArgs& args) {
@@ -98,6 +101,8 @@ void RunPush(const PushArgs& args) {
   options.horizon = args.horizon;
   options.max_steps = args.max_steps;
   options.threads = args.threads;
+  options.collision_margin = args.collision_margin;
+  options.collision_substeps = args.collision_substeps;
   options.world.obstacle = args.obstacle;
   DIFFDYN_CHECK(args.trials >= 1, "--trials: must be >= 1, got ", args.trials);
   ValidatePushTaskOptions(options);
@@ -140,6 +145,8 @@ void RunPush(const PushArgs& args) {
                {"samples", args.samples},
                {"horizon", args.horizon},
                {"max_steps", args.max_steps},
+               {"collision_margin", args.collision_margin},
+               {"collision_substeps", args.collision_substeps},
                {"seed", args.common.seed},
                {"outcomes", counts},
                {"top_view", top_view}});
@@ -181,6 +188,13 @@ void RegisterPushCommand(CLI::App& app) {
   command->add_option("--max-steps", args->max_steps, "Pushes per trial");
   command->add_option("--threads", args->threads,
                       "MPPI threads (0: all cores; results do not depend on it)");
+  command->add_option("--collision-margin", args->collision_margin,
+                      "Cost: inflate the block by this much per side in the collision test (m)")
+      ->capture_default_str();
+  command->add_option("--collision-substeps", args->collision_substeps,
+                      "Cost: also test this many poses interpolated inside each predicted push "
+                      "(0: end pose only, the seed's cost)")
+      ->capture_default_str();
   command->add_option("--out", args->out, "Directory for trials.csv and top_view.png (optional)");
   command->callback([args] { RunPush(*args); });
 }

@@ -8,7 +8,9 @@
 // 3. Runs seeded obstacle trials of MPPI (K = 1000, T = 20) with each model, executed
 //    in the ODE world (solvers/pushing_trials.h), plus an oracle row: the simulation
 //    itself as MPPI's model (K = 100, T = 5), which separates model error from
-//    controller error.
+//    controller error. The cost is the seed's plus a safety margin and a swept test
+//    over each predicted push (--collision-margin, --collision-substeps; 0 and 0 give
+//    the seed's cost exactly).
 // 4. Writes results.csv (one row per model, Wilson 95 % intervals), trials.csv (every
 //    pose and action of every trial) and, with --plot, the PNGs (plot.py).
 //
@@ -53,6 +55,8 @@ struct FigureOptions {
   int oracle_trials = 10;
   int oracle_samples = 100;
   int oracle_horizon = 5;
+  double collision_margin = PushTaskOptions{}.collision_margin;
+  int collision_substeps = PushTaskOptions{}.collision_substeps;
 };
 
 struct Row {
@@ -157,6 +161,8 @@ Row RunTrials(const std::string& name, const TransitionModel& model, int trials,
   task.horizon = horizon;
   task.max_steps = o.max_steps;
   task.threads = o.threads;
+  task.collision_margin = o.collision_margin;
+  task.collision_substeps = o.collision_substeps;
   ProgressBar bar("trials " + name, trials, !o.quiet);
   Row row{name, samples, horizon, RunPushTrials(model, trials, task, o.seed, &bar)};
   bar.Finish();
@@ -260,6 +266,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--oracle-samples", o.oracle_samples, "MPPI K of the oracle")->capture_default_str();
   app.add_option("--oracle-horizon", o.oracle_horizon, "MPPI T of the oracle")->capture_default_str();
+  app.add_option("--collision-margin", o.collision_margin,
+                 "cost: inflate the block by this much per side in the collision test (m)")
+      ->capture_default_str();
+  app.add_option("--collision-substeps", o.collision_substeps,
+                 "cost: poses tested inside each predicted push (0: end pose only, the seed's)")
+      ->capture_default_str();
   app.add_flag("--reuse", o.reuse, "reuse data.csv and models/<model>.json found in --out");
   app.add_flag("--quick", o.quick,
                "tiny run for the tests: 20 trajectories, 2 epochs, 1 trial, K 32, T 3, 2 pushes");

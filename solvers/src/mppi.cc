@@ -152,7 +152,7 @@ void Mppi::RolloutChunk(int chunk, int begin, int end, const Eigen::VectorXd& x)
     }
     // The step and its running cost.
     model_.PredictBatch(s.states, s.actions, s.next, *s.workspace);
-    cost_.Accumulate(s.next, costs);
+    cost_.AccumulateStep(s.states, s.next, costs);
     s.states.swap(s.next);
   }
 }

@@ -45,6 +45,10 @@ void ValidatePushTaskOptions(const PushTaskOptions& o) {
   DIFFDYN_CHECK(std::isfinite(o.lambda) && o.lambda > 0, "lambda: must be > 0, got ", o.lambda);
   DIFFDYN_CHECK(std::isfinite(o.noise_variance) && o.noise_variance > 0,
                 "noise_variance: must be > 0, got ", o.noise_variance);
+  DIFFDYN_CHECK(std::isfinite(o.collision_margin) && o.collision_margin >= 0,
+                "--collision-margin: must be >= 0, got ", o.collision_margin);
+  DIFFDYN_CHECK(o.collision_substeps >= 0, "--collision-substeps: must be >= 0, got ",
+                o.collision_substeps);
   if (o.start) DIFFDYN_CHECK(o.start->allFinite(), "start pose: not finite");
   if (o.goal) DIFFDYN_CHECK(o.goal->allFinite(), "goal pose: not finite");
 }
@@ -87,6 +91,8 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
   trial.poses.push_back(env.pose());
 
   PushingCost cost(trial.goal, options.obstacle, 100.0, world.block_size);
+  cost.set_collision_margin(options.collision_margin);
+  cost.set_collision_substeps(options.collision_substeps);
   MppiOptions mo;
   mo.samples = options.samples;
   mo.horizon = options.horizon;

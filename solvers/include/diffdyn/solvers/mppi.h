@@ -8,9 +8,10 @@
 //   1. warm start: U <- (u_1, ..., u_{T-1}, 0)
 //   2. eps_{k,t} ~ N(0, Sigma);  v_{k,t} = clamp(u_t + eps_{k,t}, u_min, u_max);
 //      eps_{k,t} <- v_{k,t} - u_t            (the perturbation after clamping)
-//   3. S_k = sum_{t=1..T} c(x_{k,t}) + sum_t u_t^T lambda Sigma^-1 eps_{k,t}
-//      (running cost over the predicted states x_1..x_T, no terminal cost, plus
-//       the perturbation cost)
+//   3. S_k = sum_{t=1..T} c(x_{k,t-1} -> x_{k,t}) + sum_t u_t^T lambda Sigma^-1 eps_{k,t}
+//      (running cost over the predicted transitions, no terminal cost, plus the
+//       perturbation cost; most costs only look at the new state, c(x_{k,t}),
+//       MppiCost::AccumulateStep can also look at the state before the step)
 //   4. w_k = exp(-(S_k - min_j S_j) / lambda) / sum_j exp(-(S_j - min S) / lambda)
 //   5. u_t <- u_t + sum_k w_k eps_{k,t};  execute u_0.
 //
@@ -46,6 +47,16 @@ class MppiCost {
   /// costs(b) += c(states(:, b)) for every column b; states: n x B, costs: B.
   virtual void Accumulate(const Eigen::Ref<const Eigen::MatrixXd>& states,
                           Eigen::Ref<Eigen::VectorXd> costs) const = 0;
+  /// The transition form: costs(b) += c(prev_states(:, b) -> states(:, b)) for the
+  /// step x_t -> x_{t+1} (n x B each). Mppi calls this one; the default ignores
+  /// x_t and calls Accumulate(states, costs), so a cost without a step form gives
+  /// the running cost sum_t c(x_{t+1}) of the file comment.
+  virtual void AccumulateStep(const Eigen::Ref<const Eigen::MatrixXd>& prev_states,
+                              const Eigen::Ref<const Eigen::MatrixXd>& states,
+                              Eigen::Ref<Eigen::VectorXd> costs) const {
+    (void)prev_states;
+    Accumulate(states, costs);
+  }
 };
 
 /// Settings of Mppi. Empty bounds are taken as unbounded.

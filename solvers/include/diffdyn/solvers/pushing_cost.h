@@ -11,16 +11,33 @@
 // projections on one of the edge normals of either are disjoint. Touching counts
 // as apart, as in the seed.
 //
+// Two optional safety terms (both off by default, which is the seed's cost):
+//
+//   margin m     in_collision tests the block inflated by m on each side, a square
+//                of side 0.1 + 2 m, so a pose that merely touches the obstacle, or
+//                passes within m of it, is penalized too;
+//   substeps S   the transition form c(x_t -> x_{t+1}) applies w_c once if the
+//                (inflated) block overlaps the obstacle at any of the S + 1 poses
+//                x_t + s/(S+1) (x_{t+1} - x_t), s = 1..S+1 (linear in x, y and
+//                theta, with the angle difference wrapped to [-pi, pi]), so a
+//                step that jumps across the obstacle is caught.
+//
+// With m = 0 and S = 0 both forms equal the seed's cost exactly.
+//
 //   diffdyn::PushingCost cost({0.8, -0.1, 0.0}, /*obstacle=*/true);
+//   cost.set_collision_margin(0.01);    // optional
+//   cost.set_collision_substeps(4);     // optional
 //   diffdyn::Mppi mppi(model, cost, options, seed);
 #pragma once
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <numbers>
 
 #include <Eigen/Core>
 
+#include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/solvers/mppi.h"
 
 namespace diffdyn {
@@ -54,10 +71,11 @@ inline bool RectanglesOverlap(const Rectangle& r1, const Rectangle& r2) {
   return true;
 }
 
-/// The seed's pushing cost (see the file comment) on batches of block poses.
+/// The pushing cost of the file comment on batches of block poses.
 class PushingCost : public MppiCost {
  public:
   /// Goal pose g; `obstacle` adds the collision term with weight `collision_weight`.
+  /// Margin 0 and no substeps: the seed's cost.
   PushingCost(const Eigen::Vector3d& goal, bool obstacle, double collision_weight = 100.0,
               double block_size = 0.1)
       : goal_(goal), obstacle_(obstacle), collision_weight_(collision_weight),
@@ -66,38 +84,90 @@ class PushingCost : public MppiCost {
   /// The obstacle rectangle of the task.
   static Rectangle Obstacle() { return {{0.6, 0.2}, {0.05, 0.25}, 0.0}; }
 
-  /// in_collision(pose) of the file comment.
+  /// Safety margin m (m, >= 0): the collision test inflates the block by m per side.
+  void set_collision_margin(double margin) {
+    DIFFDYN_CHECK(margin >= 0 && std::isfinite(margin),
+                  "collision margin must be finite and >= 0, got ", margin);
+    margin_ = margin;
+  }
+  double collision_margin() const { return margin_; }
+
+  /// Substeps S (>= 0) of the swept test in AccumulateStep; 0: end pose only.
+  void set_collision_substeps(int substeps) {
+    DIFFDYN_CHECK(substeps >= 0, "collision substeps must be >= 0, got ", substeps);
+    substeps_ = substeps;
+  }
+  int collision_substeps() const { return substeps_; }
+
+  /// in_collision(pose) of the file comment (block inflated by the margin).
   bool InCollision(const Eigen::Ref<const Eigen::Vector3d>& pose) const {
-    return RectanglesOverlap({pose.head<2>(), {block_half_, block_half_}, pose.z()}, Obstacle());
+    const double h = block_half_ + margin_;
+    return RectanglesOverlap({pose.head<2>(), {h, h}, pose.z()}, Obstacle());
   }
 
   /// costs(b) += (x_b - g)^T Q (x_b - g) + w_c in_collision(x_b); states: 3 x B.
   void Accumulate(const Eigen::Ref<const Eigen::MatrixXd>& states,
                   Eigen::Ref<Eigen::VectorXd> costs) const override {
     for (Eigen::Index b = 0; b < states.cols(); ++b) {
-      const double dx = states(0, b) - goal_.x(), dy = states(1, b) - goal_.y(),
-                   dt = states(2, b) - goal_.z();
-      costs[b] += dx * dx + dy * dy + 0.1 * dt * dt;
-      if (obstacle_ && NearObstacle(states(0, b), states(1, b)) && InCollision(states.col(b))) {
+      costs[b] += GoalTerm(states(0, b), states(1, b), states(2, b));
+      if (obstacle_ && Collides(states(0, b), states(1, b), states(2, b))) {
         costs[b] += collision_weight_;
       }
     }
   }
 
+  /// costs(b) += (x'_b - g)^T Q (x'_b - g) + w_c swept_collision(x_b -> x'_b), with
+  /// x = prev_states(:, b), x' = states(:, b) (3 x B each) and the swept test of
+  /// the file comment; equals Accumulate(states, costs) when substeps = 0.
+  void AccumulateStep(const Eigen::Ref<const Eigen::MatrixXd>& prev_states,
+                      const Eigen::Ref<const Eigen::MatrixXd>& states,
+                      Eigen::Ref<Eigen::VectorXd> costs) const override {
+    if (substeps_ == 0) {
+      Accumulate(states, costs);
+      return;
+    }
+    const int poses = substeps_ + 1;
+    for (Eigen::Index b = 0; b < states.cols(); ++b) {
+      const double x1 = states(0, b), y1 = states(1, b), t1 = states(2, b);
+      costs[b] += GoalTerm(x1, y1, t1);
+      if (!obstacle_) continue;
+      const double x0 = prev_states(0, b), y0 = prev_states(1, b), t0 = prev_states(2, b);
+      const double dx = x1 - x0, dy = y1 - y0;
+      const double dt = std::remainder(t1 - t0, 2 * std::numbers::pi);
+      for (int s = 1; s <= poses; ++s) {
+        const double f = double(s) / poses;
+        if (Collides(x0 + f * dx, y0 + f * dy, t0 + f * dt)) {
+          costs[b] += collision_weight_;
+          break;
+        }
+      }
+    }
+  }
+
  private:
-  // False when the block's circumscribed circle misses the obstacle (then they are
-  // apart and the exact test, with its trigonometry, is skipped).
-  bool NearObstacle(double x, double y) const {
+  double GoalTerm(double x, double y, double theta) const {
+    const double dx = x - goal_.x(), dy = y - goal_.y(), dt = theta - goal_.z();
+    return dx * dx + dy * dy + 0.1 * dt * dt;
+  }
+
+  // The inflated block at (x, y, theta) overlaps the obstacle. The exact test, with
+  // its trigonometry, is skipped when the block's circumscribed circle misses the
+  // obstacle (then they are apart).
+  bool Collides(double x, double y, double theta) const {
     const Rectangle o = Obstacle();
+    const double h = block_half_ + margin_;
     const double ox = std::max(std::abs(x - o.center.x()) - o.half_size.x(), 0.0);
     const double oy = std::max(std::abs(y - o.center.y()) - o.half_size.y(), 0.0);
-    return ox * ox + oy * oy < 2 * block_half_ * block_half_;
+    if (ox * ox + oy * oy >= 2 * h * h) return false;
+    return RectanglesOverlap({{x, y}, {h, h}, theta}, o);
   }
 
   Eigen::Vector3d goal_;
   bool obstacle_;
   double collision_weight_;
   double block_half_;
+  double margin_ = 0;
+  int substeps_ = 0;
 };
 
 }  // namespace diffdyn

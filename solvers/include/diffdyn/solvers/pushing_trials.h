@@ -14,6 +14,8 @@
 //
 // Tasks (the NeuralODE-Panda seed's):
 //   obstacle  start (0.4, 0, -0.2 pi), goal (0.8, -0.1, 0), cost with 100 x in_collision
+//             (solvers/pushing_cost.h; collision_margin and collision_substeps add the
+//             margin and the swept test, both 0 = the seed's cost)
 //   free      start (0.4, 0, 0.2 pi),  goal (0.8, 0, 0),    no collision cost
 // MPPI: Sigma = 0.5 I, lambda = 0.01, u in [-1, 1] x [-pi/2, pi/2] x [0, 1].
 //
@@ -55,6 +57,8 @@ struct PushTaskOptions {
   double noise_variance = 0.5;       ///< MPPI Sigma = noise_variance I
   std::optional<Eigen::Vector3d> start;  ///< overrides the task's nominal start pose
   std::optional<Eigen::Vector3d> goal;   ///< overrides the task's goal pose
+  double collision_margin = 0.0;     ///< PushingCost safety margin m per side (m); 0: the seed's test
+  int collision_substeps = 0;        ///< PushingCost swept-test substeps S; 0: end pose only (seed)
 };
 
 /// One trial's record.

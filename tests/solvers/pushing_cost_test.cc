@@ -1,0 +1,204 @@
+// The pushing cost's safety margin and swept test, and MPPI's transition-cost form.
+#include "diffdyn/solvers/pushing_cost.h"
+
+#include <cmath>
+#include <numbers>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/solvers/mppi.h"
+#include "diffdyn/solvers/pushing_trials.h"
+
+namespace diffdyn {
+namespace {
+
+const Eigen::Vector3d kGoal(0.8, -0.1, 0.0);
+
+// Sums the cost of one pose (Accumulate) or one transition (AccumulateStep).
+double PoseCost(const PushingCost& cost, const Eigen::Vector3d& x) {
+  Eigen::VectorXd c = Eigen::VectorXd::Zero(1);
+  cost.Accumulate(x, c);
+  return c[0];
+}
+double StepCost(const PushingCost& cost, const Eigen::Vector3d& x0, const Eigen::Vector3d& x1) {
+  Eigen::VectorXd c = Eigen::VectorXd::Zero(1);
+  cost.AccumulateStep(x0, x1, c);
+  return c[0];
+}
+double GoalTerm(const Eigen::Vector3d& x) {
+  const Eigen::Vector3d d = x - kGoal;
+  return d.x() * d.x() + d.y() * d.y() + 0.1 * d.z() * d.z();
+}
+
+TEST(PushingCostSafety, SweptTestCatchesAJumpAcrossTheObstacle) {
+  // Both ends clear (obstacle x in [0.55, 0.65]); the straight path crosses it.
+  const Eigen::Vector3d before(0.48, 0.2, 0.0), after(0.72, 0.2, 0.3);
+  PushingCost cost(kGoal, true);
+  EXPECT_FALSE(cost.InCollision(before));
+  EXPECT_FALSE(cost.InCollision(after));
+  EXPECT_DOUBLE_EQ(StepCost(cost, before, after), GoalTerm(after));
+  cost.set_collision_substeps(4);
+  EXPECT_DOUBLE_EQ(StepCost(cost, before, after), GoalTerm(after) + 100.0);
+  // Reversed, too; and a step that stays clear costs nothing extra.
+  EXPECT_DOUBLE_EQ(StepCost(cost, after, before), GoalTerm(before) + 100.0);
+  const Eigen::Vector3d below(0.72, -0.2, 0.0);
+  EXPECT_DOUBLE_EQ(StepCost(cost, Eigen::Vector3d(0.48, -0.2, 0.0), below), GoalTerm(below));
+  // The angle is interpolated the short way round. At x = 0.49 the block is clear
+  // when axis-aligned (x <= 0.54) and at 3 rad (x <= 0.5465), and overlaps at
+  // 2.25 rad (x <= 0.5603). From 3 to -3 rad the short way passes pi (clear), the
+  // long way would pass 2.25 rad.
+  cost.set_collision_substeps(7);
+  const Eigen::Vector3d at3(0.49, 0.2, 3.0), at_minus3(0.49, 0.2, -3.0), at15(0.49, 0.2, 1.5);
+  EXPECT_FALSE(cost.InCollision(at3));
+  EXPECT_FALSE(cost.InCollision(at_minus3));
+  EXPECT_FALSE(cost.InCollision(at15));
+  EXPECT_TRUE(cost.InCollision(Eigen::Vector3d(0.49, 0.2, 2.25)));
+  EXPECT_DOUBLE_EQ(StepCost(cost, at3, at_minus3), GoalTerm(at_minus3));
+  EXPECT_DOUBLE_EQ(StepCost(cost, at3, at15), GoalTerm(at15) + 100.0);
+}
+
+TEST(PushingCostSafety, MarginCatchesAPoseFiveMillimetresAway) {
+  const Eigen::Vector3d pose(0.495, 0.2, 0.0);  // block x in [0.445, 0.545]: 5 mm gap
+  PushingCost cost(kGoal, true);
+  EXPECT_FALSE(cost.InCollision(pose));
+  cost.set_collision_margin(0.004);
+  EXPECT_FALSE(cost.InCollision(pose));
+  cost.set_collision_margin(0.01);
+  EXPECT_TRUE(cost.InCollision(pose));
+  EXPECT_DOUBLE_EQ(PoseCost(cost, pose), GoalTerm(pose) + 100.0);
+  // Resting 0.1 mm from it (the ODE world stops the block at the obstacle): clear
+  // for the seed's test, caught by a 1 mm margin.
+  const Eigen::Vector3d touching(0.4999, 0.2, 0.0);
+  cost.set_collision_margin(0.0);
+  EXPECT_FALSE(cost.InCollision(touching));
+  cost.set_collision_margin(0.001);
+  EXPECT_TRUE(cost.InCollision(touching));
+  EXPECT_THROW(cost.set_collision_margin(-0.01), Error);
+  EXPECT_THROW(cost.set_collision_substeps(-1), Error);
+  PushTaskOptions options;
+  options.collision_margin = -1;
+  EXPECT_THROW(ValidatePushTaskOptions(options), Error);
+}
+
+TEST(PushingCostSafety, MarginZeroWithoutSweepIsTheSeedsCostExactly) {
+  // The seed's cost written out: quadratic goal term + 100 x exact overlap of the block.
+  Rng rng(5);
+  const int n = 3000;
+  Eigen::MatrixXd prev(3, n), states(3, n);
+  for (int b = 0; b < n; ++b) {
+    for (Eigen::MatrixXd* m : {&prev, &states}) {
+      (*m)(0, b) = Uniform(rng, 0.35, 0.85);
+      (*m)(1, b) = Uniform(rng, -0.2, 0.6);
+      (*m)(2, b) = Uniform(rng, -std::numbers::pi, std::numbers::pi);
+    }
+  }
+  PushingCost cost(kGoal, true);
+  Eigen::VectorXd pose_costs = Eigen::VectorXd::Zero(n), step_costs = Eigen::VectorXd::Zero(n);
+  cost.Accumulate(states, pose_costs);
+  cost.AccumulateStep(prev, states, step_costs);
+  int collisions = 0;
+  for (int b = 0; b < n; ++b) {
+    const Eigen::Vector3d x = states.col(b);
+    const bool hit =
+        RectanglesOverlap({x.head<2>(), {0.05, 0.05}, x.z()}, PushingCost::Obstacle());
+    collisions += hit;
+    const double seed = GoalTerm(x) + (hit ? 100.0 : 0.0);
+    ASSERT_EQ(pose_costs[b], seed) << "pose " << x.transpose();
+    ASSERT_EQ(step_costs[b], seed) << "pose " << x.transpose();
+  }
+  EXPECT_GT(collisions, 50);
+  EXPECT_LT(collisions, n - 50);
+}
+
+// x_{t+1} = x_t + 0.1 u_t in three dimensions.
+class Drift3 : public TransitionModel {
+ public:
+  int state_size() const override { return 3; }
+  int action_size() const override { return 3; }
+  std::string kind() const override { return "drift3"; }
+  std::unique_ptr<TransitionWorkspace> MakeWorkspace(int) const override {
+    return std::make_unique<TransitionWorkspace>();
+  }
+  void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                    const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                    Eigen::Ref<Eigen::MatrixXd> next, TransitionWorkspace&) const override {
+    CheckBatchSizes(states, actions, next);
+    next = states + 0.1 * actions;
+  }
+};
+
+// The seed's pushing cost with only the pose form (MppiCost's default step form).
+class PoseOnlyCost : public MppiCost {
+ public:
+  void Accumulate(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                  Eigen::Ref<Eigen::VectorXd> costs) const override {
+    inner_.Accumulate(states, costs);
+  }
+
+ private:
+  PushingCost inner_{kGoal, true};
+};
+
+// Records the transitions MPPI hands to the step form (one chunk, one thread).
+class RecordingCost : public MppiCost {
+ public:
+  void Accumulate(const Eigen::Ref<const Eigen::MatrixXd>&,
+                  Eigen::Ref<Eigen::VectorXd>) const override {
+    ADD_FAILURE() << "Mppi should call the step form";
+  }
+  void AccumulateStep(const Eigen::Ref<const Eigen::MatrixXd>& prev,
+                      const Eigen::Ref<const Eigen::MatrixXd>& states,
+                      Eigen::Ref<Eigen::VectorXd>) const override {
+    prevs.push_back(prev);
+    nexts.push_back(states);
+  }
+  mutable std::vector<Eigen::MatrixXd> prevs, nexts;
+};
+
+MppiOptions SmallOptions() {
+  MppiOptions o;
+  o.samples = 64;
+  o.horizon = 6;
+  o.chunk_size = 64;
+  o.threads = 1;
+  o.u_min = Eigen::Vector3d(-1.0, -1.0, -1.0);
+  o.u_max = Eigen::Vector3d(1.0, 1.0, 1.0);
+  return o;
+}
+
+TEST(MppiStepCost, CostsWithoutAStepFormGiveUnchangedResults) {
+  // PushingCost with margin 0 and no sweep, and the same cost without a step form,
+  // give bit-identical commands and sample costs.
+  Drift3 model;
+  PoseOnlyCost pose_only;
+  PushingCost seed_cost(kGoal, true);
+  Mppi a(model, pose_only, SmallOptions(), 3), b(model, seed_cost, SmallOptions(), 3);
+  Eigen::Vector3d x(0.45, 0.1, -0.5);
+  for (int i = 0; i < 6; ++i) {
+    const Eigen::VectorXd ua = a.Command(x), ub = b.Command(x);
+    ASSERT_EQ(ua, ub);
+    ASSERT_EQ(a.sample_costs(), b.sample_costs());
+    x += 0.1 * ua;
+  }
+}
+
+TEST(MppiStepCost, StepFormSeesTheStateBeforeEachStep) {
+  Drift3 model;
+  RecordingCost cost;
+  Mppi mppi(model, cost, SmallOptions(), 4);
+  const Eigen::Vector3d x(0.3, -0.2, 0.1);
+  mppi.Command(x);
+  ASSERT_EQ(cost.prevs.size(), 6u);
+  EXPECT_EQ(cost.prevs[0], x.replicate(1, 64));
+  for (int t = 1; t < 6; ++t) EXPECT_EQ(cost.prevs[t], cost.nexts[t - 1]) << "step " << t;
+  // Each step moved by 0.1 u with |u_i| <= 1.
+  for (int t = 0; t < 6; ++t) {
+    EXPECT_LE((cost.nexts[t] - cost.prevs[t]).cwiseAbs().maxCoeff(), 0.1 + 1e-12);
+    EXPECT_GT((cost.nexts[t] - cost.prevs[t]).cwiseAbs().maxCoeff(), 0.0);
+  }
+}
+
+}  // namespace
+}  // namespace diffdyn
