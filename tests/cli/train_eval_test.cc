@@ -4,6 +4,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -154,6 +155,72 @@ TEST(TrainAndEval, BadDataFilesNameFileAndLine) {
   const auto missing = RunDiffdyn("eval --model " + model + " --data /nonexistent/x.csv");
   EXPECT_EQ(missing.exit_code, 2);
   EXPECT_NE(missing.err.find("/nonexistent/x.csv"), std::string::npos);
+}
+
+// `good` with field `field` of line `line` (1-based, the header is line 1) replaced;
+// an empty replacement with `erase` drops the field.
+std::string EditField(const std::string& good, int line, int field, const std::string& value,
+                      bool erase = false) {
+  std::istringstream in(good);
+  std::string row, out;
+  for (int number = 1; std::getline(in, row); ++number) {
+    if (number == line) {
+      std::vector<std::string> fields;
+      std::istringstream cells(row + ",");
+      std::string cell;
+      while (std::getline(cells, cell, ',')) fields.push_back(cell);
+      if (erase) {
+        fields.erase(fields.begin() + field);
+      } else {
+        fields[field] = value;
+      }
+      row.clear();
+      for (size_t i = 0; i < fields.size(); ++i) row += (i ? "," : "") + fields[i];
+    }
+    out += row + "\n";
+  }
+  return out;
+}
+
+// Every kind of bad data file, through `diffdyn train`: exit 2, one line naming the
+// file and the exact line of the fault, and no model file written.
+TEST(TrainCommand, BadDataFilesNameTheExactLine) {
+  const std::string good = Head(2);
+  struct Case {
+    std::string name, contents;
+    int line;
+    std::string fragment;
+  };
+  std::string no_column;
+  {
+    std::istringstream in(good);
+    std::string row;
+    while (std::getline(in, row)) no_column += row.substr(0, row.rfind(',')) + "\n";
+  }
+  const std::vector<Case> cases{
+      {"no_column.csv", no_column, 1, "header"},
+      {"short_row.csv", EditField(good, 6, 7, "", /*erase=*/true), 6, "fields"},
+      {"nan_state.csv", EditField(good, 3, 2, "nan"), 3, "not finite"},
+      {"inf_action.csv", EditField(good, 4, 6, "-inf"), 4, "not finite"},
+      {"huge_number.csv", EditField(good, 9, 3, "1e999"), 9, "not a number"},
+      {"text_number.csv", EditField(good, 5, 3, "abc"), 5, "not a number"},
+      {"text_step.csv", EditField(good, 8, 1, "two"), 8, "not an integer"},
+      {"ragged_step.csv", EditField(good, 7, 1, "9"), 7, "ragged"},
+      {"ragged_action.csv", EditField(good, 10, 5, ""), 10, "ragged"},
+  };
+  for (const Case& c : cases) {
+    const std::string path = WriteTemp("exact_" + c.name, c.contents);
+    const std::string model = ::testing::TempDir() + "/exact_unused_" + c.name + ".json";
+    std::filesystem::remove(model);
+    const auto r = RunDiffdyn("train --epochs 1 --hidden 4 --quiet --out " + model + " --data " + path);
+    EXPECT_EQ(r.exit_code, 2) << c.name << ": " << r.err;
+    EXPECT_EQ(CountLines(r.err), 1) << c.name << ": " << r.err;
+    EXPECT_EQ(r.err.rfind("error: ", 0), 0u) << r.err;
+    EXPECT_NE(r.err.find(path + ":" + std::to_string(c.line) + ":"), std::string::npos)
+        << c.name << ": " << r.err;
+    EXPECT_NE(r.err.find(c.fragment), std::string::npos) << c.name << ": " << r.err;
+    EXPECT_FALSE(std::filesystem::exists(model)) << c.name;
+  }
 }
 
 }  // namespace
