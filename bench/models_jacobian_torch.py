@@ -16,19 +16,9 @@ import time
 
 import torch
 
+from torch_common import blas_in_use
+
 BATCH = 1000
-
-
-def blas_in_use():
-    """Shared BLAS libraries mapped into this process (after a matmul)."""
-    torch.ones(64, 64, dtype=torch.float64) @ torch.ones(64, 64, dtype=torch.float64)
-    libs = set()
-    with open("/proc/self/maps") as maps:
-        for line in maps:
-            path = line.split()[-1]
-            if "blas" in path or "mkl" in path:
-                libs.add(os.path.realpath(path))
-    return sorted(libs)
 
 
 def make_net():

@@ -9,24 +9,22 @@
 // FLOPs counted: GEMM multiply-adds only, 2 m n B per product; forward
 // (W h), backward dW = abar h^T and the cotangents W^T abar down to the inputs:
 // 3 * sum_l 2 n_{l+1} n_l B = 33.6 MFLOP per iteration.
-#include <dlfcn.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <map>
 #include <string>
-#include <thread>
 
 #include <benchmark/benchmark.h>
 
 #include "diffdyn/models/init.h"
 #include "diffdyn/models/mlp.h"
+#include "peak_dgemm.h"
 
 namespace diffdyn {
 namespace {
 
 constexpr int kBatch = 500;
-constexpr int kPeakSize = 2048;
 
 Eigen::MatrixXd RandomMatrix(int rows, int cols, std::uint64_t seed) {
   Rng rng(seed);
@@ -60,50 +58,12 @@ void BM_ForwardBackward(benchmark::State& state) {
 }
 BENCHMARK(BM_ForwardBackward)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMicrosecond);
 
-// Eigen GEMM, C = A B with the columns of C split over two threads.
-void BM_PeakDgemmEigenTwoThreads(benchmark::State& state) {
-  const Eigen::MatrixXd a = RandomMatrix(kPeakSize, kPeakSize, 4);
-  const Eigen::MatrixXd b = RandomMatrix(kPeakSize, kPeakSize, 5);
-  Eigen::MatrixXd c(kPeakSize, kPeakSize);
-  const int half = kPeakSize / 2;
-  for (auto _ : state) {
-    std::thread other([&] { c.rightCols(half).noalias() = a * b.rightCols(half); });
-    c.leftCols(half).noalias() = a * b.leftCols(half);
-    other.join();
-    benchmark::DoNotOptimize(c.data());
-  }
-  state.counters["GFLOP/s"] = benchmark::Counter(2.0 * kPeakSize * kPeakSize * kPeakSize * 1e-9,
-                                                 benchmark::Counter::kIsIterationInvariantRate);
-}
+// The peak candidates (peak_dgemm.h): Eigen and OpenBLAS, C = A B at 2048^3 on two threads.
+void BM_PeakDgemmEigenTwoThreads(benchmark::State& state) { bench::PeakDgemm2Threads(state); }
 BENCHMARK(BM_PeakDgemmEigenTwoThreads)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
-// OpenBLAS cblas_dgemm on two threads, loaded with dlopen (skipped if absent).
 void BM_PeakDgemmOpenBlasTwoThreads(benchmark::State& state) {
-  using Dgemm = void (*)(int, int, int, int, int, int, double, const double*, int, const double*,
-                         int, double, double*, int);
-  using SetThreads = void (*)(int);
-  void* lib = dlopen("libopenblas.so.0", RTLD_NOW | RTLD_LOCAL);
-  Dgemm dgemm = lib ? reinterpret_cast<Dgemm>(dlsym(lib, "cblas_dgemm")) : nullptr;
-  SetThreads set_threads =
-      lib ? reinterpret_cast<SetThreads>(dlsym(lib, "openblas_set_num_threads")) : nullptr;
-  if (!dgemm || !set_threads) {
-    state.SkipWithError("libopenblas.so.0 not found");
-    for (auto _ : state) {
-    }
-    return;
-  }
-  set_threads(2);
-  const Eigen::MatrixXd a = RandomMatrix(kPeakSize, kPeakSize, 4);
-  const Eigen::MatrixXd b = RandomMatrix(kPeakSize, kPeakSize, 5);
-  Eigen::MatrixXd c(kPeakSize, kPeakSize);
-  constexpr int kColMajor = 102, kNoTrans = 111;
-  for (auto _ : state) {
-    dgemm(kColMajor, kNoTrans, kNoTrans, kPeakSize, kPeakSize, kPeakSize, 1.0, a.data(), kPeakSize,
-          b.data(), kPeakSize, 0.0, c.data(), kPeakSize);
-    benchmark::DoNotOptimize(c.data());
-  }
-  state.counters["GFLOP/s"] = benchmark::Counter(2.0 * kPeakSize * kPeakSize * kPeakSize * 1e-9,
-                                                 benchmark::Counter::kIsIterationInvariantRate);
+  bench::PeakDgemmOpenBlas2Threads(state);
 }
 BENCHMARK(BM_PeakDgemmOpenBlasTwoThreads)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 

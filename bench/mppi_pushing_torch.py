@@ -25,21 +25,11 @@ import time
 
 import torch
 
+from torch_common import blas_in_use
+
 K = 1000
 START = (0.4, 0.0, -0.2 * math.pi)
 GOAL = (0.8, -0.1, 0.0)
-
-
-def blas_in_use():
-    """Shared BLAS libraries mapped into this process (after a matmul)."""
-    torch.ones(64, 64, dtype=torch.float64) @ torch.ones(64, 64, dtype=torch.float64)
-    libs = set()
-    with open("/proc/self/maps") as maps:
-        for line in maps:
-            path = line.split()[-1]
-            if "blas" in path or "mkl" in path or "atlas" in path:
-                libs.add(os.path.realpath(path))
-    return sorted(libs)
 
 
 def load_mlp(path):

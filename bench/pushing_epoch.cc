@@ -14,7 +14,6 @@
 //   OPENBLAS_NUM_THREADS=1 build/bench/bench_pushing_epoch   (from the repository root;
 //   DIFFDYN_PUSHING_CSV=path overrides the data file)
 #include <benchmark/benchmark.h>
-#include <dlfcn.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -24,12 +23,12 @@
 
 #include "diffdyn/autodiff_ode/parallel.h"
 #include "diffdyn/solvers/pushing_training.h"
+#include "peak_dgemm.h"
 
 namespace diffdyn {
 namespace {
 
 constexpr int kTransitions = 1000;
-constexpr int kPeakSize = 2048;
 
 const PushingWindows& Data() {
   static const PushingWindows data = [] {
@@ -93,55 +92,16 @@ BENCHMARK(BM_EpochAbsNodeDopri5)
     ->Unit(benchmark::kMillisecond)
     ->MinTime(2.0);
 
-// The peak: C = A B at 2048^3 with the columns of C split over two threads.
-void BM_PeakDgemm2Threads(benchmark::State& state) {
-  const Eigen::MatrixXd a = Eigen::MatrixXd::Constant(kPeakSize, kPeakSize, 0.5);
-  const Eigen::MatrixXd b = Eigen::MatrixXd::Constant(kPeakSize, kPeakSize, 0.25);
-  Eigen::MatrixXd c(kPeakSize, kPeakSize);
-  for (auto _ : state) {
-    ParallelForChunks(kPeakSize, kPeakSize / 2, 2, [&](int, int begin, int end) {
-      c.middleCols(begin, end - begin).noalias() = a * b.middleCols(begin, end - begin);
-    });
-    benchmark::DoNotOptimize(c.data());
-  }
-  const double flops = 2.0 * kPeakSize * kPeakSize * double(kPeakSize);
-  state.counters["GFLOP/s"] = benchmark::Counter(flops * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
-}
+// The peak: C = A B at 2048^3 on two threads, Eigen and OpenBLAS (peak_dgemm.h).
+void BM_PeakDgemm2Threads(benchmark::State& state) { bench::PeakDgemm2Threads(state); }
 BENCHMARK(BM_PeakDgemm2Threads)
     ->MeasureProcessCPUTime()
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond)
     ->MinTime(2.0);
 
-// The other candidate for the peak: OpenBLAS's cblas_dgemm on two threads at 2048^3,
-// loaded with dlopen (skipped if absent). The best of the two is the peak.
 void BM_PeakDgemmOpenBlas2Threads(benchmark::State& state) {
-  using Dgemm = void (*)(int, int, int, int, int, int, double, const double*, int, const double*,
-                         int, double, double*, int);
-  using SetThreads = void (*)(int);
-  void* lib = dlopen("libopenblas.so.0", RTLD_NOW | RTLD_LOCAL);
-  Dgemm dgemm = lib ? reinterpret_cast<Dgemm>(dlsym(lib, "cblas_dgemm")) : nullptr;
-  SetThreads set_threads =
-      lib ? reinterpret_cast<SetThreads>(dlsym(lib, "openblas_set_num_threads")) : nullptr;
-  if (!dgemm || !set_threads) {
-    state.SkipWithError("libopenblas.so.0 not found");
-    for (auto _ : state) {
-    }
-    return;
-  }
-  set_threads(2);
-  const Eigen::MatrixXd a = Eigen::MatrixXd::Constant(kPeakSize, kPeakSize, 0.5);
-  const Eigen::MatrixXd b = Eigen::MatrixXd::Constant(kPeakSize, kPeakSize, 0.25);
-  Eigen::MatrixXd c(kPeakSize, kPeakSize);
-  constexpr int kColMajor = 102, kNoTrans = 111;
-  for (auto _ : state) {
-    dgemm(kColMajor, kNoTrans, kNoTrans, kPeakSize, kPeakSize, kPeakSize, 1.0, a.data(), kPeakSize,
-          b.data(), kPeakSize, 0.0, c.data(), kPeakSize);
-    benchmark::DoNotOptimize(c.data());
-  }
-  const double flops = 2.0 * kPeakSize * kPeakSize * double(kPeakSize);
-  state.counters["GFLOP/s"] =
-      benchmark::Counter(flops * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
+  bench::PeakDgemmOpenBlas2Threads(state);
 }
 BENCHMARK(BM_PeakDgemmOpenBlas2Threads)
     ->MeasureProcessCPUTime()

@@ -20,21 +20,11 @@ import time
 
 import torch
 
+from torch_common import blas_in_use
+
 TRANSITIONS = 1000
 BATCH = 500
 RG = math.sqrt((0.1 ** 2 + 0.1 ** 2) / 12)
-
-
-def blas_in_use():
-    """Shared BLAS libraries mapped into this process (after a matmul)."""
-    torch.ones(64, 64, dtype=torch.float64) @ torch.ones(64, 64, dtype=torch.float64)
-    libs = set()
-    with open("/proc/self/maps") as maps:
-        for line in maps:
-            path = line.split()[-1]
-            if "blas" in path or "mkl" in path or "atlas" in path:
-                libs.add(os.path.realpath(path))
-    return sorted(libs)
 
 
 def load(path):
