@@ -7,26 +7,10 @@
 #include <gtest/gtest.h>
 
 #include "diffdyn/solvers/pushing_cost.h"
+#include "toy_models.h"
 
 namespace diffdyn {
 namespace {
-
-// A planar point that moves by its (bounded) action: x_{t+1} = x_t + 0.1 u_t.
-class PointModel : public TransitionModel {
- public:
-  int state_size() const override { return 2; }
-  int action_size() const override { return 2; }
-  std::string kind() const override { return "point"; }
-  std::unique_ptr<TransitionWorkspace> MakeWorkspace(int) const override {
-    return std::make_unique<TransitionWorkspace>();
-  }
-  void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
-                    const Eigen::Ref<const Eigen::MatrixXd>& actions,
-                    Eigen::Ref<Eigen::MatrixXd> next, TransitionWorkspace&) const override {
-    CheckBatchSizes(states, actions, next);
-    next = states + 0.1 * actions;
-  }
-};
 
 // Squared distance to a goal, plus a wall x = 0.5 the point must go around for |y| < 0.25.
 class GoalCost : public MppiCost {
@@ -61,7 +45,7 @@ MppiOptions PointOptions() {
 // Runs the closed loop on the true point dynamics; returns the final state and
 // whether the wall was ever entered.
 std::pair<Eigen::Vector2d, bool> ClosedLoop(bool wall, int threads, std::uint64_t seed) {
-  PointModel model;
+  toy::DriftModel model(2);
   GoalCost cost(wall);
   MppiOptions o = PointOptions();
   o.threads = threads;
@@ -97,7 +81,7 @@ TEST(Mppi, GoesAroundAWall) {
 }
 
 TEST(Mppi, SameSeedSameCommandsAtAnyThreadCount) {
-  PointModel model;
+  toy::DriftModel model(2);
   GoalCost cost(true);
   Mppi a(model, cost, [] { auto o = PointOptions(); o.threads = 1; return o; }(), 9);
   Mppi b(model, cost, [] { auto o = PointOptions(); o.threads = 3; return o; }(), 9);
@@ -112,7 +96,7 @@ TEST(Mppi, SameSeedSameCommandsAtAnyThreadCount) {
 
 TEST(Mppi, WeightsFavourLowCostSamples) {
   // With a tiny temperature the update follows the single best sample.
-  PointModel model;
+  toy::DriftModel model(2);
   GoalCost cost(false);
   MppiOptions o = PointOptions();
   o.lambda = 1e-6;
@@ -126,7 +110,7 @@ TEST(Mppi, WeightsFavourLowCostSamples) {
 }
 
 TEST(Mppi, BadOptionsAreNamed) {
-  PointModel model;
+  toy::DriftModel model(2);
   GoalCost cost(false);
   MppiOptions o = PointOptions();
   o.u_min = Eigen::VectorXd::Zero(3);

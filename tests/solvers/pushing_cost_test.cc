@@ -10,6 +10,7 @@
 #include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/solvers/mppi.h"
 #include "diffdyn/solvers/pushing_trials.h"
+#include "toy_models.h"
 
 namespace diffdyn {
 namespace {
@@ -112,23 +113,6 @@ TEST(PushingCostSafety, MarginZeroWithoutSweepIsTheSeedsCostExactly) {
   EXPECT_LT(collisions, n - 50);
 }
 
-// x_{t+1} = x_t + 0.1 u_t in three dimensions.
-class Drift3 : public TransitionModel {
- public:
-  int state_size() const override { return 3; }
-  int action_size() const override { return 3; }
-  std::string kind() const override { return "drift3"; }
-  std::unique_ptr<TransitionWorkspace> MakeWorkspace(int) const override {
-    return std::make_unique<TransitionWorkspace>();
-  }
-  void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
-                    const Eigen::Ref<const Eigen::MatrixXd>& actions,
-                    Eigen::Ref<Eigen::MatrixXd> next, TransitionWorkspace&) const override {
-    CheckBatchSizes(states, actions, next);
-    next = states + 0.1 * actions;
-  }
-};
-
 // The seed's pushing cost with only the pose form (MppiCost's default step form).
 class PoseOnlyCost : public MppiCost {
  public:
@@ -171,7 +155,7 @@ MppiOptions SmallOptions() {
 TEST(MppiStepCost, CostsWithoutAStepFormGiveUnchangedResults) {
   // PushingCost with margin 0 and no sweep, and the same cost without a step form,
   // give bit-identical commands and sample costs.
-  Drift3 model;
+  toy::DriftModel model(3);
   PoseOnlyCost pose_only;
   PushingCost seed_cost(kGoal, true);
   Mppi a(model, pose_only, SmallOptions(), 3), b(model, seed_cost, SmallOptions(), 3);
@@ -185,7 +169,7 @@ TEST(MppiStepCost, CostsWithoutAStepFormGiveUnchangedResults) {
 }
 
 TEST(MppiStepCost, StepFormSeesTheStateBeforeEachStep) {
-  Drift3 model;
+  toy::DriftModel model(3);
   RecordingCost cost;
   Mppi mppi(model, cost, SmallOptions(), 4);
   const Eigen::Vector3d x(0.3, -0.2, 0.1);

@@ -7,20 +7,16 @@
 #include <gtest/gtest.h>
 
 #include "diffdyn/physics/pushing_oracle.h"
+#include "toy_models.h"
 
 namespace diffdyn {
 namespace {
 
 // A rough kinematic block: the push moves the centre along the block's x axis by the
 // push's component d = 0.1 u2 cos(u1) on it, and an off-centre push (u0) turns it.
-class KinematicBlock : public TransitionModel {
+class KinematicBlock : public toy::ToyModel {
  public:
-  int state_size() const override { return 3; }
-  int action_size() const override { return 3; }
-  std::string kind() const override { return "kinematic"; }
-  std::unique_ptr<TransitionWorkspace> MakeWorkspace(int) const override {
-    return std::make_unique<TransitionWorkspace>();
-  }
+  KinematicBlock() : ToyModel(3, 3, "kinematic") {}
   void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
                     const Eigen::Ref<const Eigen::MatrixXd>& actions,
                     Eigen::Ref<Eigen::MatrixXd> next, TransitionWorkspace&) const override {
