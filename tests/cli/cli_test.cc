@@ -1,10 +1,5 @@
 // The command line's conventions: exit codes, one-line errors, --help, --json.
-#include <sys/wait.h>
-#include <unistd.h>
-
-#include <array>
 #include <cmath>
-#include <cstdio>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -13,52 +8,14 @@
 #include <nlohmann/json.hpp>
 
 #include "diffdyn/solvers/version.h"
+#include "run_diffdyn.h"
 
 namespace {
 
-struct Result {
-  int exit_code;
-  std::string out;  // stdout
-  std::string err;  // stderr
-};
-
-// Runs the diffdyn executable with `args` (a shell-quoted string).
-Result RunDiffdyn(const std::string& args) {
-  // A file of its own per call: ctest runs tests in parallel.
-  std::string err_file = testing::TempDir() + "/diffdyn_stderr_XXXXXX";
-  const int fd = mkstemp(err_file.data());
-  EXPECT_GE(fd, 0);
-  close(fd);
-  const std::string command = std::string(DIFFDYN_EXE) + " " + args + " 2>" + err_file;
-  Result result{};
-  FILE* pipe = popen(command.c_str(), "r");
-  EXPECT_NE(pipe, nullptr);
-  std::array<char, 4096> buffer{};
-  size_t n = 0;
-  while ((n = fread(buffer.data(), 1, buffer.size(), pipe)) > 0) result.out.append(buffer.data(), n);
-  const int status = pclose(pipe);
-  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  FILE* err = fopen(err_file.c_str(), "r");
-  if (err != nullptr) {
-    while ((n = fread(buffer.data(), 1, buffer.size(), err)) > 0) result.err.append(buffer.data(), n);
-    fclose(err);
-  }
-  std::remove(err_file.c_str());
-  return result;
-}
-
-std::string ReadFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-int CountLines(const std::string& s) {
-  int lines = 0;
-  for (char c : s) lines += (c == '\n');
-  return lines;
-}
+using diffdyn::testing::CountLines;
+using diffdyn::testing::ReadAll;
+using diffdyn::testing::RunDiffdyn;
+using Result = diffdyn::testing::CommandResult;
 
 TEST(Cli, UnknownCommandIsOneLineErrorWithExitCode2) {
   const Result r = RunDiffdyn("frobnicate");
@@ -167,7 +124,7 @@ TEST(Demo, QuickRunExercisesEveryStageAndWritesItsReport) {
     if (f != nullptr) fclose(f);
   }
   // The report names every stage, with a command that redoes it.
-  const std::string report = ReadFile(out + "/report.md");
+  const std::string report = ReadAll(out + "/report.md");
   for (const char* text : {"## 1. Data", "## 2. The absolute NeuralODE", "## 3. Pushing",
                            "## 4. Identifying", "## Timings", "diffdyn collect --trajectories 24",
                            "diffdyn train --data", "diffdyn push --model", "95 % Wilson"}) {
@@ -193,15 +150,15 @@ TEST(Demo, SameSeedSameBytes) {
   for (const char* file : {"pushes.csv", "abs-node.json", "training.csv", "push/trials.csv",
                            "pendulum_fit.csv"}) {
     // The model's provenance names its data file, inside the output folder.
-    std::string first = ReadFile(a + "/" + file), second = ReadFile(b + "/" + file);
+    std::string first = ReadAll(a + "/" + file), second = ReadAll(b + "/" + file);
     ReplaceAll(first, a, "OUT");
     ReplaceAll(second, b, "OUT");
     EXPECT_FALSE(first.empty()) << file;
     EXPECT_EQ(first, second) << file;
   }
   // Timings aside, the reports agree (the output folder's name appears in the commands).
-  std::string ra = ReportWithoutTimings(ReadFile(a + "/report.md"));
-  std::string rb = ReportWithoutTimings(ReadFile(b + "/report.md"));
+  std::string ra = ReportWithoutTimings(ReadAll(a + "/report.md"));
+  std::string rb = ReportWithoutTimings(ReadAll(b + "/report.md"));
   ReplaceAll(ra, a, "OUT");
   ReplaceAll(rb, b, "OUT");
   EXPECT_FALSE(ra.empty());

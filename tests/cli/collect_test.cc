@@ -13,31 +13,17 @@
 
 namespace {
 
+using diffdyn::testing::CountLines;
+using diffdyn::testing::ReadAll;
 using diffdyn::testing::RunDiffdyn;
-
-std::string TempPath(const std::string& name) {
-  return (std::filesystem::path(::testing::TempDir()) / name).string();
-}
-
-std::string ReadAll(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-int Lines(const std::string& s) {
-  int n = 0;
-  for (char c : s) n += c == '\n';
-  return n;
-}
+using diffdyn::testing::TempPath;
 
 TEST(CollectCommand, JsonSummaryAndIdenticalBytesAtOneAndTwoThreads) {
   const std::string one = TempPath("collect_one.csv"), two = TempPath("collect_two.csv");
   const std::string common = " --trajectories 3 --length 3 --seed 5 --quiet --json --out ";
   const auto r1 = RunDiffdyn("collect --threads 1" + common + one);
   ASSERT_EQ(r1.exit_code, 0) << r1.err;
-  EXPECT_EQ(Lines(r1.out), 1) << r1.out;
+  EXPECT_EQ(CountLines(r1.out), 1) << r1.out;
   const auto summary = nlohmann::json::parse(r1.out);
   EXPECT_EQ(summary.at("path").get<std::string>(), one);
   EXPECT_EQ(summary.at("trajectories").get<int>(), 3);
@@ -71,7 +57,7 @@ TEST(CollectCommand, BadOptionsAreOneLineErrorsWithExitCode2) {
                         Case{"--trajectories 2", "--out"}}) {
     const auto r = RunDiffdyn("collect --quiet " + c.args);
     EXPECT_EQ(r.exit_code, 2) << c.args;
-    EXPECT_EQ(Lines(r.err), 1) << c.args << ": " << r.err;
+    EXPECT_EQ(CountLines(r.err), 1) << c.args << ": " << r.err;
     EXPECT_EQ(r.err.rfind("error: ", 0), 0u) << r.err;
     EXPECT_NE(r.err.find(c.names), std::string::npos) << c.args << ": " << r.err;
   }

@@ -12,24 +12,10 @@
 
 namespace {
 
+using diffdyn::testing::CountLines;
+using diffdyn::testing::ReadAll;
 using diffdyn::testing::RunDiffdyn;
-
-std::string TempPath(const std::string& name) {
-  return (std::filesystem::path(::testing::TempDir()) / name).string();
-}
-
-std::string ReadAll(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-int Lines(const std::string& s) {
-  int n = 0;
-  for (char c : s) n += c == '\n';
-  return n;
-}
+using diffdyn::testing::TempPath;
 
 // The ODE world itself as the model, tiny MPPI: a few dozen simulated pushes.
 const char* kTinyOracle =
@@ -39,7 +25,7 @@ TEST(PushCommand, TinyOracleRunWritesJsonKeysCsvAndTopView) {
   const std::string dir = TempPath("push_tiny");
   const auto r = RunDiffdyn(std::string(kTinyOracle) + "--json --out " + dir);
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_EQ(Lines(r.out), 1) << r.out;
+  EXPECT_EQ(CountLines(r.out), 1) << r.out;
   const auto s = nlohmann::json::parse(r.out);
   for (const char* key : {"trials", "successes", "success_rate", "ci95_low", "ci95_high",
                           "mean_pushes", "ms_per_command"}) {
@@ -62,7 +48,7 @@ TEST(PushCommand, TinyOracleRunWritesJsonKeysCsvAndTopView) {
   EXPECT_EQ(csv.rfind("trial,step,x,y,theta,push_location,push_angle,push_length,outcome\n", 0),
             0u)
       << csv;
-  EXPECT_EQ(Lines(csv), 1 + static_cast<int>(2 * pushes + 2 + 0.5)) << csv;
+  EXPECT_EQ(CountLines(csv), 1 + static_cast<int>(2 * pushes + 2 + 0.5)) << csv;
   EXPECT_TRUE(std::filesystem::exists(dir + "/top_view.png"));
   EXPECT_EQ(s.at("top_view").get<std::string>(), dir + "/top_view.png");
 }
@@ -97,7 +83,7 @@ TEST(PushCommand, BadInputsAreOneLineErrorsWithExitCode2) {
   for (const Case& c : cases) {
     const auto r = RunDiffdyn(c.args);
     EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.err;
-    EXPECT_EQ(Lines(r.err), 1) << c.args << "\n" << r.err;
+    EXPECT_EQ(CountLines(r.err), 1) << c.args << "\n" << r.err;
     EXPECT_EQ(r.err.rfind("error: ", 0), 0u) << r.err;
     EXPECT_NE(r.err.find(c.names), std::string::npos) << c.args << "\n" << r.err;
   }

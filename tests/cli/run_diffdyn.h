@@ -11,6 +11,9 @@
 
 #include <array>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -46,6 +49,26 @@ inline CommandResult RunDiffdyn(const std::string& args) {
   }
   std::remove(err_file.c_str());
   return result;
+}
+
+/// A path named `name` in gtest's temporary folder.
+inline std::string TempPath(const std::string& name) {
+  return (std::filesystem::path(::testing::TempDir()) / name).string();
+}
+
+/// The whole file, bytes as they are ("" if it cannot be read).
+inline std::string ReadAll(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+/// Number of '\n' in `s`.
+inline int CountLines(const std::string& s) {
+  int n = 0;
+  for (char c : s) n += c == '\n';
+  return n;
 }
 
 }  // namespace diffdyn::testing
