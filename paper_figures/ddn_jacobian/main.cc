@@ -16,6 +16,7 @@
 #include "diffdyn/autodiff_ode/io.h"
 #include "diffdyn/autodiff_ode/progress.h"
 #include "diffdyn/models/model_file.h"
+#include "../figure_main.h"
 
 namespace fs = std::filesystem;
 using namespace diffdyn;
@@ -195,19 +196,9 @@ int main(int argc, char** argv) {
     }
     WriteFileAtomically(fs::path(out) / "results.csv", [&](std::ostream& f) { f << results.str(); });
     std::printf("wrote %s/results.csv and curves_*d.csv\n", out.c_str());
-    if (plot) {
-      const std::string cmd = "/usr/bin/python3 " DIFFDYN_FIGURE_DIR "/plot.py '" + out + "'";
-      if (std::system(cmd.c_str()) != 0) {
-        std::fprintf(stderr, "error: plot.py failed\n");
-        return 1;
-      }
-    }
-  } catch (const Error& e) {
-    std::fprintf(stderr, "error: %s\n", e.what());
-    return 2;
+    if (plot) figures::RunPlot(out);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "error: %s\n", e.what());
-    return 1;
+    return figures::ReportError(e);
   }
   return 0;
 }

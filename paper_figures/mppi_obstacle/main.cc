@@ -33,6 +33,7 @@
 #include "diffdyn/physics/pushing_oracle.h"
 #include "diffdyn/solvers/pushing_trials.h"
 #include "diffdyn/solvers/pushing_training.h"
+#include "../figure_main.h"
 
 namespace diffdyn {
 namespace {
@@ -238,10 +239,7 @@ void Run(FigureOptions o) {
     WriteResults(dir, rows);
   }
   if (!o.quiet) fmt::print("wrote {}\n", (dir / "results.csv").string());
-  if (o.plot) {
-    const std::string cmd = "/usr/bin/python3 " DIFFDYN_FIGURE_DIR "/plot.py '" + o.out + "'";
-    DIFFDYN_CHECK(std::system(cmd.c_str()) == 0, "plot.py failed: ", cmd);
-  }
+  if (o.plot) figures::RunPlot(o.out);
 }
 
 }  // namespace
@@ -284,12 +282,8 @@ int main(int argc, char** argv) {
   }
   try {
     diffdyn::Run(o);
-  } catch (const diffdyn::Error& e) {
-    std::fprintf(stderr, "error: %s\n", e.what());
-    return 2;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "error: %s\n", e.what());
-    return 1;
+    return diffdyn::figures::ReportError(e);
   }
   return 0;
 }

@@ -39,6 +39,7 @@
 #include "diffdyn/autodiff_ode/parallel.h"
 #include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/solvers/pushing_training.h"
+#include "../figure_main.h"
 
 namespace fs = std::filesystem;
 using namespace diffdyn;
@@ -343,19 +344,9 @@ int main(int argc, char** argv) {
       WriteGrid(fs::path(out) / ("grid_" + grid + ".csv"), runs, grid);
       std::printf("wrote %s/grid_%s.csv\n", out.c_str(), grid.c_str());
     }
-    if (plot) {
-      const std::string cmd = "/usr/bin/python3 " DIFFDYN_FIGURE_DIR "/plot.py '" + out + "'";
-      if (std::system(cmd.c_str()) != 0) {
-        std::fprintf(stderr, "error: plot.py failed\n");
-        return 1;
-      }
-    }
-  } catch (const Error& e) {
-    std::fprintf(stderr, "error: %s\n", e.what());
-    return 2;
+    if (plot) figures::RunPlot(out);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "error: %s\n", e.what());
-    return 1;
+    return figures::ReportError(e);
   }
   return 0;
 }
