@@ -53,6 +53,7 @@
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/parallel.h"
 #include "diffdyn/models/activations.h"
+#include "diffdyn/models/gemm.h"
 
 namespace diffdyn {
 
@@ -481,8 +482,8 @@ class Mlp {
       // Hidden layers: abar_{l-1} = (W_l^T abar_l) .* g'(a_{l-1}), one GEMM each.
       for (int l = L - 2; l >= 1; --l) {
         const int rows_in = arch_.sizes[l];
-        nxt->topLeftCorner(rows_in, sweeps).noalias() =
-            W(l).transpose() * cur->topLeftCorner(rows, sweeps);
+        Gemm(1.0, W(l), true, cur->topLeftCorner(rows, sweeps), false, 0.0,
+             nxt->topLeftCorner(rows_in, sweeps));
         for (int bb = 0; bb < nb; ++bb) {
           nxt->block(0, Eigen::Index(bb) * m, rows_in, m).array().colwise() *=
               ch.dg[l - 1].col(bb).array();
@@ -492,7 +493,8 @@ class Mlp {
       }
       // dy_k/dx = W_0^T abar_0, transposed into the layout of J.
       if (L >= 2) {
-        nxt->topLeftCorner(n0, sweeps).noalias() = W(0).transpose() * cur->topLeftCorner(rows, sweeps);
+        Gemm(1.0, W(0), true, cur->topLeftCorner(rows, sweeps), false, 0.0,
+             nxt->topLeftCorner(n0, sweeps));
         std::swap(cur, nxt);
       }
       for (int bb = 0; bb < nb; ++bb) {
@@ -526,12 +528,12 @@ class Mlp {
       if (l + 1 < L) {
         auto a = ch->h[l + 1].leftCols(nb);
         a.colwise() = b(l);
-        a.noalias() += W(l) * ch->h[l].leftCols(nb);
+        Gemm(1.0, W(l), false, ch->h[l].leftCols(nb), false, 1.0, a);
         ApplyActivation(arch_.activations[l], a.data(), a.size(), a.data(), ch->dg[l].data(),
                         jac ? ch->ddg[l].data() : nullptr);
       } else {
         y.colwise() = b(l);
-        y.noalias() += W(l) * ch->h[l].leftCols(nb);
+        Gemm(1.0, W(l), false, ch->h[l].leftCols(nb), false, 1.0, y);
       }
       if (!jac) continue;
       // Jacobian chain: U_0 = W_0 per sample, U_l = W_l Z_l; Z_{l+1} = diag(g') U_l.
@@ -539,7 +541,7 @@ class Mlp {
       if (l == 0) {
         for (int bb = 0; bb < nb; ++bb) u.middleCols(Eigen::Index(bb) * n0, n0) = W(0);
       } else {
-        u.noalias() = W(l) * ch->z[l].topLeftCorner(arch_.sizes[l], nz);
+        Gemm(1.0, W(l), false, ch->z[l].topLeftCorner(arch_.sizes[l], nz), false, 0.0, u);
       }
       if (l + 1 < L) {
         auto z = ch->z[l + 1].topLeftCorner(rows, nz);
@@ -624,30 +626,30 @@ class Mlp {
           gw.setZero();
           gb.setZero();
         }
-        gw.noalias() += abar(cur, rows) * ch->h[l].leftCols(nb).transpose();
+        Gemm(1.0, abar(cur, rows), false, ch->h[l].leftCols(nb), true, 1.0, gw);
         gb += abar(cur, rows).rowwise().sum();
         if (gjac) {
           if (l == 0) {
             for (int bb = 0; bb < nb; ++bb) gw += ubar(cur, rows).middleCols(Eigen::Index(bb) * n0, n0);
           } else {
-            gw.noalias() += ubar(cur, rows) * ch->z[l].topLeftCorner(cols, nz).transpose();
+            Gemm(1.0, ubar(cur, rows), false, ch->z[l].topLeftCorner(cols, nz), true, 1.0, gw);
           }
         }
       }
       if (l == 0) {
         if (grad_inputs) {
-          grad_inputs->middleCols(begin, nb).noalias() = W(0).transpose() * abar(cur, rows);
+          Gemm(1.0, W(0), true, abar(cur, rows), false, 0.0, grad_inputs->middleCols(begin, nb));
         }
         break;
       }
       // Cotangents of layer l-1: abar' = (W^T abar) .* g'; zbar = W^T ubar.
       const int nxt = 1 - cur;
       auto next_abar = abar(nxt, cols);
-      next_abar.noalias() = W(l).transpose() * abar(cur, rows);
+      Gemm(1.0, W(l), true, abar(cur, rows), false, 0.0, next_abar);
       next_abar.array() *= ch->dg[l - 1].leftCols(nb).array();
       if (gjac) {
         auto zbar = ch->zbar.topLeftCorner(cols, nz);
-        zbar.noalias() = W(l).transpose() * ubar(cur, rows);
+        Gemm(1.0, W(l), true, ubar(cur, rows), false, 0.0, zbar);
         const auto u_prev = ch->u[l - 1].topLeftCorner(cols, nz);
         auto dbar = ch->dbar.topLeftCorner(cols, nb);
         auto next_ubar = ubar(nxt, cols);
