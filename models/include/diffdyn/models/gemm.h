@@ -63,8 +63,8 @@ void Gemm(double alpha, const Eigen::MatrixBase<DA>& a, bool transpose_a,
   const Eigen::Index n = c.cols();
   const Eigen::Index k = transpose_a ? a.rows() : a.cols();
   eigen_assert((transpose_a ? a.cols() : a.rows()) == m);
-  eigen_assert((transpose_b ? b.cols() : b.rows()) == n);
-  eigen_assert((transpose_b ? b.rows() : b.cols()) == k);
+  eigen_assert((transpose_b ? b.rows() : b.cols()) == n);
+  eigen_assert((transpose_b ? b.cols() : b.rows()) == k);
   if (m == 0 || n == 0) return;
   if (k == 0) {
     if (beta == 0.0) {
