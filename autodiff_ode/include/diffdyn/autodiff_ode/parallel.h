@@ -14,7 +14,10 @@
 
 #include <algorithm>
 #include <atomic>
+#include <condition_variable>
+#include <cstdint>
 #include <exception>
+#include <functional>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -35,6 +38,85 @@ inline int ResolveThreads(int requested) {
   const unsigned hw = std::thread::hardware_concurrency();
   return hw == 0 ? 1 : static_cast<int>(hw);
 }
+
+namespace internal {
+
+/// Process-wide helper threads for ParallelForChunks, started on first use and
+/// reused (a thread start costs ~25 us, as much as a small batched product).
+/// One loop at a time: TryRun returns false when the pool is busy (a nested
+/// or concurrent loop), and that caller starts threads of its own.
+class WorkerPool {
+ public:
+  /// The pool (threads are added when a loop asks for more than it has).
+  static WorkerPool& Instance() {
+    static WorkerPool pool;
+    return pool;
+  }
+
+  /// Runs job() on `helpers` pool threads and on the calling thread, and
+  /// returns when all have finished; false (nothing run) if the pool is busy.
+  /// job must not throw.
+  template <typename Job>
+  bool TryRun(int helpers, Job& job) {
+    std::unique_lock<std::mutex> busy(run_mutex_, std::try_to_lock);
+    if (!busy.owns_lock()) return false;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      while (static_cast<int>(threads_.size()) < helpers) {
+        const int index = static_cast<int>(threads_.size());
+        threads_.emplace_back([this, index] { Loop(index); });
+      }
+      job_ = [&job] { job(); };
+      wanted_ = helpers;
+      running_ = helpers;
+      ++generation_;
+    }
+    start_.notify_all();
+    job();
+    std::unique_lock<std::mutex> lock(mutex_);
+    done_.wait(lock, [this] { return running_ == 0; });
+    job_ = nullptr;
+    return true;
+  }
+
+  ~WorkerPool() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    start_.notify_all();
+    for (std::thread& t : threads_) t.join();
+  }
+
+ private:
+  WorkerPool() = default;
+
+  void Loop(int index) {
+    std::uint64_t seen = 0;
+    std::unique_lock<std::mutex> lock(mutex_);
+    for (;;) {
+      start_.wait(lock, [&] { return stop_ || generation_ != seen; });
+      if (stop_) return;
+      seen = generation_;
+      if (index >= wanted_) continue;
+      lock.unlock();
+      job_();
+      lock.lock();
+      if (--running_ == 0) done_.notify_one();
+    }
+  }
+
+  std::mutex run_mutex_;  // held by the loop using the pool
+  std::mutex mutex_;      // guards everything below
+  std::condition_variable start_, done_;
+  std::vector<std::thread> threads_;
+  std::function<void()> job_;
+  int wanted_ = 0, running_ = 0;
+  std::uint64_t generation_ = 0;
+  bool stop_ = false;
+};
+
+}  // namespace internal
 
 /// Runs body(chunk, begin, end) for chunk = 0 .. NumChunks(n, chunk_size) - 1 over
 /// items [begin, end), on up to `threads` threads (<= 0: all cores). The first
@@ -65,11 +147,15 @@ void ParallelForChunks(int n, int chunk_size, int threads, Body&& body) {
       }
     }
   };
-  std::vector<std::thread> pool;
-  pool.reserve(workers - 1);
-  for (int w = 1; w < workers; ++w) pool.emplace_back(worker);
-  worker();
-  for (auto& t : pool) t.join();
+  // The pool's threads when it is free; else (a nested or concurrent loop)
+  // threads of our own.
+  if (!internal::WorkerPool::Instance().TryRun(workers - 1, worker)) {
+    std::vector<std::thread> pool;
+    pool.reserve(workers - 1);
+    for (int w = 1; w < workers; ++w) pool.emplace_back(worker);
+    worker();
+    for (auto& t : pool) t.join();
+  }
   if (error) std::rethrow_exception(error);
 }
 
