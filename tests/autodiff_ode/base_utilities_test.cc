@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -103,6 +104,31 @@ TEST(ParallelForChunks, RethrowsWorkerException) {
                                    if (chunk == 7) throw Error("chunk 7 failed");
                                  }),
                Error);
+}
+
+// Loops inside loops, and loops from several threads at once, each complete
+// with every item once (the worker pool is busy, so they start their own threads).
+TEST(ParallelForChunks, NestedAndConcurrentLoopsCoverEveryItem) {
+  constexpr int kOuter = 6, kInner = 500;
+  std::vector<std::vector<int>> hits(kOuter, std::vector<int>(kInner, 0));
+  ParallelForChunks(kOuter, 1, 2, [&](int, int begin, int) {
+    ParallelForChunks(kInner, 64, 2, [&](int, int b, int e) {
+      for (int i = b; i < e; ++i) ++hits[begin][i];
+    });
+  });
+  for (const auto& row : hits) EXPECT_EQ(std::count(row.begin(), row.end(), 1), kInner);
+
+  std::vector<double> sums(4, 0.0);
+  std::vector<std::thread> callers;
+  for (int t = 0; t < 4; ++t) {
+    callers.emplace_back([&sums, t] {
+      for (int rep = 0; rep < 50; ++rep) sums[t] += ChunkedSum(2);
+    });
+  }
+  for (auto& c : callers) c.join();
+  double expected = 0.0;
+  for (int rep = 0; rep < 50; ++rep) expected += ChunkedSum(1);
+  for (double s : sums) EXPECT_EQ(s, expected);
 }
 
 TEST(Random, SameSeedSameStream) {
