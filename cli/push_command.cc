@@ -2,13 +2,14 @@
 //
 //   diffdyn push --model MODEL.json --trials 20 --obstacle --seed 1 --samples 1000
 //                --horizon 20 --max-steps 20 [--collision-margin M] [--collision-substeps S]
+//                [--clearance C --clearance-weight W] [--fallback-margin F]
 //                [--threads 0] [--out DIR] [--json]
 //
 // --model is a pushing model file or `oracle` (the ODE world itself as the model).
 // Prints the success rate with its 95 % Wilson interval, the mean number of pushes,
 // the median milliseconds per MPPI command and the outcomes. With --out, writes
-// DIR/trials.csv (one row per pose) and DIR/top_view.png of the first successful
-// trial (else the first trial).
+// DIR/trials.csv (one row per pose, with the model's prediction of it) and
+// DIR/top_view.png of the first successful trial (else the first trial).
 #include "push_command.h"
 
 #include <filesystem>
@@ -37,7 +38,8 @@ std::unique_ptr<TransitionModel> LoadPushModel(const std::string& name, const Pu
 
 void WritePushTrialsCsv(const std::filesystem::path& path, const PushTrialsSummary& summary) {
   WriteFileAtomically(path, [&](std::ostream& out) {
-    out << "trial,step,x,y,theta,push_location,push_angle,push_length,outcome\n";
+    out << "trial,step,x,y,theta,push_location,push_angle,push_length,outcome,pred_x,pred_y,"
+           "pred_theta\n";
     for (std::size_t i = 0; i < summary.runs.size(); ++i) {
       const PushTrial& t = summary.runs[i];
       for (std::size_t k = 0; k < t.poses.size(); ++k) {
@@ -49,7 +51,14 @@ void WritePushTrialsCsv(const std::filesystem::path& path, const PushTrialsSumma
         } else {
           out << ",,,";
         }
-        out << t.outcome << "\n";
+        out << t.outcome;
+        // The model's prediction of this pose from the previous pose and action.
+        if (k >= 1 && k - 1 < t.predicted.size()) {
+          const auto& q = t.predicted[k - 1];
+          fmt::print(out, ",{:.9g},{:.9g},{:.9g}\n", q.x(), q.y(), q.z());
+        } else {
+          out << ",,,\n";
+        }
       }
     }
   });
@@ -92,6 +101,9 @@ struct PushArgs {
   std::string out;
   double collision_margin = PushTaskOptions{}.collision_margin;
   int collision_substeps = PushTaskOptions{}.collision_substeps;
+  double fallback_margin = PushTaskOptions{}.fallback_margin;
+  double clearance = PushTaskOptions{}.clearance;
+  double clearance_weight = PushTaskOptions{}.clearance_weight;
 };
 
 void RunPush(const PushArgs& args) {
@@ -103,6 +115,9 @@ void RunPush(const PushArgs& args) {
   options.threads = args.threads;
   options.collision_margin = args.collision_margin;
   options.collision_substeps = args.collision_substeps;
+  options.fallback_margin = args.fallback_margin;
+  options.clearance = args.clearance;
+  options.clearance_weight = args.clearance_weight;
   options.world.obstacle = args.obstacle;
   DIFFDYN_CHECK(args.trials >= 1, "--trials: must be >= 1, got ", args.trials);
   ValidatePushTaskOptions(options);
@@ -131,6 +146,8 @@ void RunPush(const PushArgs& args) {
   }
 
   const auto counts = OutcomeCounts(summary);
+  int fallbacks = 0;
+  for (const auto& t : summary.runs) fallbacks += t.fallbacks;
   if (args.common.json) {
     PrintJson({{"trials", summary.trials},
                {"successes", summary.successes},
@@ -147,6 +164,10 @@ void RunPush(const PushArgs& args) {
                {"max_steps", args.max_steps},
                {"collision_margin", args.collision_margin},
                {"collision_substeps", args.collision_substeps},
+               {"fallback_margin", args.fallback_margin},
+               {"fallbacks", fallbacks},
+               {"clearance", args.clearance},
+               {"clearance_weight", args.clearance_weight},
                {"seed", args.common.seed},
                {"outcomes", counts},
                {"top_view", top_view}});
@@ -194,6 +215,16 @@ void RegisterPushCommand(CLI::App& app) {
   command->add_option("--collision-substeps", args->collision_substeps,
                       "Cost: also test this many poses interpolated inside each predicted push "
                       "(0: end pose only, the seed's cost)")
+      ->capture_default_str();
+  command->add_option("--fallback-margin", args->fallback_margin,
+                      "MPPI: execute the best sample instead of the weighted average when the "
+                      "model predicts the average to cost more than the best plus this (inf: off)")
+      ->capture_default_str();
+  command->add_option("--clearance", args->clearance,
+                      "Cost: smooth clearance term active closer than this to the obstacle (m; 0: off)")
+      ->capture_default_str();
+  command->add_option("--clearance-weight", args->clearance_weight,
+                      "Cost: weight w of the clearance term w (1 - d / clearance)^2")
       ->capture_default_str();
   command->add_option("--out", args->out, "Directory for trials.csv and top_view.png (optional)");
   command->callback([args] { RunPush(*args); });

@@ -17,8 +17,10 @@ namespace diffdyn::cli {
 /// Throws diffdyn::Error naming --model for a missing or bad file.
 std::unique_ptr<TransitionModel> LoadPushModel(const std::string& name, const PushingConfig& world);
 
-/// trial,step,x,y,theta,push_location,push_angle,push_length,outcome: one row per
-/// pose, the last pose of a trial without an action. Written atomically.
+/// trial,step,x,y,theta,push_location,push_angle,push_length,outcome,pred_x,pred_y,
+/// pred_theta: one row per pose, the last pose of a trial without an action; pred_*
+/// is the model's prediction of this pose from the previous row's pose and action
+/// (empty on step 0). Written atomically.
 void WritePushTrialsCsv(const std::filesystem::path& path, const PushTrialsSummary& summary);
 
 /// The trial to picture: the first successful one, else the first.

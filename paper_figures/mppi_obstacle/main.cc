@@ -1,13 +1,15 @@
 // NeuralODE-Panda Figure 1: MPPI pushes the block to the goal around the obstacle.
 //
 // 1. Collects ODE-engine data with the task's start spread (like `diffdyn collect
-//    --starts task`: obstacle in the world, uniform actions, 10 pushes per trajectory).
+//    --starts task --obstacle off`: no obstacle in the world, so the models learn the
+//    block's free motion and a push into the obstacle is predicted to overlap it, which
+//    the collision cost sees; uniform actions, 10 pushes per trajectory).
 // 2. Trains the four models with the paper's settings (hidden 100, single-step SE(2)
 //    loss, Adam, batch 500, 80/20 split; abs-nn, res-nn, abs-node lr 1e-3; res-node
 //    lr 1e-2; NeuralODEs rk4 3/8 rule on 10 grid points).
 // 3. Runs seeded obstacle trials of MPPI (K = 1000, T = 20) with each model, executed
 //    in the ODE world (solvers/pushing_trials.h), plus an oracle row: the simulation
-//    itself as MPPI's model (K = 100, T = 5), which separates model error from
+//    itself as MPPI's model (K = 100, T = 10), which separates model error from
 //    controller error. The cost is the seed's plus a safety margin and a swept test
 //    over each predicted push (--collision-margin, --collision-substeps; 0 and 0 give
 //    the seed's cost exactly).
@@ -55,7 +57,7 @@ struct FigureOptions {
   int max_steps = 20;
   int oracle_trials = 10;
   int oracle_samples = 100;
-  int oracle_horizon = 5;
+  int oracle_horizon = 10;  // T = 5 plans too few pushes ahead to go around the obstacle
   double collision_margin = PushTaskOptions{}.collision_margin;
   int collision_substeps = PushTaskOptions{}.collision_substeps;
 };
@@ -200,7 +202,7 @@ void Run(FigureOptions o) {
   const fs::path dir(o.out);
   fs::create_directories(dir / "models");
 
-  // 1. Data: the task's start spread, obstacle in the world.
+  // 1. Data: the task's start spread, no obstacle in the world.
   fs::path data_path = o.data.empty() ? dir / "data.csv" : fs::path(o.data);
   if (!types.empty() && o.data.empty() && !(o.reuse && fs::exists(data_path))) {
     CollectOptions c;
@@ -209,7 +211,7 @@ void Run(FigureOptions o) {
     c.seed = o.seed;
     c.threads = std::max(1, o.threads <= 0 ? 2 : o.threads);
     c.starts = StartDistribution::kTask;
-    c.world.obstacle = true;
+    c.world.obstacle = false;
     ProgressBar bar("collect", o.trajectories, !o.quiet);
     c.progress = [&](int done) { bar.Update(done); };
     CollectStats stats;

@@ -82,6 +82,16 @@ Mppi::Mppi(const TransitionModel& model, const MppiCost& cost, MppiOptions optio
     s->workspace = model_.MakeWorkspace(width);
     scratch_.push_back(std::move(s));
   }
+  DIFFDYN_CHECK(o.fallback_margin >= 0, "MPPI: fallback_margin must be >= 0, got ",
+                o.fallback_margin);
+  if (std::isfinite(o.fallback_margin)) {
+    check_states_.resize(n_, 2);
+    check_next_.resize(n_, 2);
+    check_actions_.resize(m_, 2);
+    check_costs_.resize(2);
+    best_sequence_.resize(m_, o.horizon);
+    check_workspace_ = model_.MakeWorkspace(2);
+  }
   Reset();
 }
 
@@ -189,8 +199,32 @@ Eigen::VectorXd Mppi::Command(const Eigen::Ref<const Eigen::VectorXd>& x_in) {
   // 5. Update the nominal sequence.
   // u_t + sum_k w_k eps_k is a convex combination of clamped actions; clamping again
   // only removes rounding (a push length of -3e-20, say).
+  // The best sample's sequence u + eps_{k*} (already within the bounds), for step 6.
+  if (check_workspace_) {
+    Eigen::Index best_sample = 0;
+    costs_.minCoeff(&best_sample);
+    for (int t = 0; t < T; ++t) best_sequence_.col(t) = nominal_.col(t) + noise_[t].col(best_sample);
+  }
   for (int t = 0; t < T; ++t) nominal_.col(t).noalias() += noise_[t] * weights_;
   Clamp(nominal_);
+
+  // 6. Keep the averaged sequence only if the model does not predict it to be worse
+  // than the best sample by more than the margin (column 0: U, column 1: best).
+  if (check_workspace_) {
+    check_states_.colwise() = state_;
+    check_costs_.setZero();
+    for (int t = 0; t < T; ++t) {
+      check_actions_.col(0) = nominal_.col(t);
+      check_actions_.col(1) = best_sequence_.col(t);
+      model_.PredictBatch(check_states_, check_actions_, check_next_, *check_workspace_);
+      cost_.AccumulateStep(check_states_, check_next_, check_costs_);
+      check_states_.swap(check_next_);
+    }
+    if (!(check_costs_[0] <= check_costs_[1] + options_.fallback_margin)) {
+      nominal_ = best_sequence_;
+      ++fallbacks_;
+    }
+  }
   return nominal_.col(0);
 }
 

@@ -47,6 +47,12 @@ void ValidatePushTaskOptions(const PushTaskOptions& o) {
                 "noise_variance: must be > 0, got ", o.noise_variance);
   DIFFDYN_CHECK(std::isfinite(o.collision_margin) && o.collision_margin >= 0,
                 "--collision-margin: must be >= 0, got ", o.collision_margin);
+  DIFFDYN_CHECK(std::isfinite(o.clearance) && o.clearance >= 0,
+                "--clearance: must be >= 0, got ", o.clearance);
+  DIFFDYN_CHECK(std::isfinite(o.clearance_weight) && o.clearance_weight >= 0,
+                "--clearance-weight: must be >= 0, got ", o.clearance_weight);
+  DIFFDYN_CHECK(o.fallback_margin >= 0, "--fallback-margin: must be >= 0 (inf: off), got ",
+                o.fallback_margin);
   DIFFDYN_CHECK(o.collision_substeps >= 0, "--collision-substeps: must be >= 0, got ",
                 o.collision_substeps);
   if (o.start) DIFFDYN_CHECK(o.start->allFinite(), "start pose: not finite");
@@ -93,6 +99,7 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
   PushingCost cost(trial.goal, options.obstacle, 100.0, world.block_size);
   cost.set_collision_margin(options.collision_margin);
   cost.set_collision_substeps(options.collision_substeps);
+  cost.set_clearance(options.clearance, options.clearance_weight);
   MppiOptions mo;
   mo.samples = options.samples;
   mo.horizon = options.horizon;
@@ -101,7 +108,11 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
   mo.u_min = Eigen::Vector3d(-1.0, -kPi / 2, 0.0);
   mo.u_max = Eigen::Vector3d(1.0, kPi / 2, 1.0);
   mo.threads = options.threads;
+  mo.fallback_margin = options.fallback_margin;
   Mppi mppi(model, cost, mo, mppi_seed);
+  // One-sample batch for the model's prediction of each executed push.
+  auto predict_ws = model.MakeWorkspace(1);
+  Eigen::MatrixXd predict_next(3, 1);
 
   trial.outcome = "max_steps";
   for (int step = 0; step < options.max_steps; ++step) {
@@ -112,6 +123,8 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
     trial.command_ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
     DIFFDYN_CHECK(u.allFinite(), "MPPI returned a non-finite action in trial ", index);
     const Eigen::Vector3d action(u[0], u[1], u[2]);
+    model.PredictBatch(x, u, predict_next, *predict_ws);
+    trial.predicted.emplace_back(predict_next(0, 0), predict_next(1, 0), predict_next(2, 0));
     const PushResult result = env.Step(action);
     trial.actions.push_back(action);
     trial.poses.push_back(result.pose);
@@ -137,6 +150,7 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
       break;
     }
   }
+  trial.fallbacks = mppi.fallbacks();
   return trial;
 }
 

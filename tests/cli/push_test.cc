@@ -45,7 +45,9 @@ TEST(PushCommand, TinyOracleRunWritesJsonKeysCsvAndTopView) {
 
   // One row per pose: 2 trials x (pushes + 1), the header first.
   const std::string csv = ReadAll(dir + "/trials.csv");
-  EXPECT_EQ(csv.rfind("trial,step,x,y,theta,push_location,push_angle,push_length,outcome\n", 0),
+  EXPECT_EQ(csv.rfind("trial,step,x,y,theta,push_location,push_angle,push_length,outcome,"
+                      "pred_x,pred_y,pred_theta\n",
+                      0),
             0u)
       << csv;
   EXPECT_EQ(CountLines(csv), 1 + static_cast<int>(2 * pushes + 2 + 0.5)) << csv;
@@ -79,6 +81,7 @@ TEST(PushCommand, BadInputsAreOneLineErrorsWithExitCode2) {
       {"push --model oracle --samples 0", "--samples"},
       {"push --model oracle --trials 0", "--trials"},
       {"push --model oracle --max-steps 0", "--max-steps"},
+      {"push --model oracle --fallback-margin -1", "--fallback-margin"},
   };
   for (const Case& c : cases) {
     const auto r = RunDiffdyn(c.args);

@@ -109,6 +109,50 @@ TEST(Mppi, WeightsFavourLowCostSamples) {
   EXPECT_GT(path(0, o.horizon), path(0, 0));
 }
 
+// One step toward (1, 0) with a post right ahead: a sample passes above or below it,
+// but a warm temperature averages the two sides into a step into the post.
+class PostCost : public MppiCost {
+ public:
+  void Accumulate(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                  Eigen::Ref<Eigen::VectorXd> costs) const override {
+    for (Eigen::Index b = 0; b < states.cols(); ++b) {
+      costs[b] += (states.col(b) - Eigen::Vector2d(1.0, 0.0)).squaredNorm();
+      costs[b] += HitsPost(states.col(b)) ? 100 : 0;
+    }
+  }
+  static bool HitsPost(const Eigen::Vector2d& x) { return x.x() > 0.03 && std::abs(x.y()) < 0.05; }
+};
+
+TEST(Mppi, FallbackNeverExecutesAnAverageWorseThanTheBestSample) {
+  toy::DriftModel model(2);
+  PostCost cost;
+  MppiOptions o = PointOptions();
+  o.horizon = 1;
+  o.lambda = 0.1;  // warm: many samples above and below the post share the weight
+  o.noise_variance = 1.0;
+  int averaged_hits = 0, fallbacks = 0;
+  for (std::uint64_t seed = 1; seed <= 16; ++seed) {
+    Mppi plain(model, cost, o, seed);
+    MppiOptions checked = o;
+    checked.fallback_margin = 50;
+    Mppi safe(model, cost, checked, seed);
+    const Eigen::Vector2d u_plain = plain.Command(Eigen::Vector2d::Zero());
+    const Eigen::Vector2d u_safe = safe.Command(Eigen::Vector2d::Zero());
+    averaged_hits += PostCost::HitsPost(0.1 * u_plain);
+    fallbacks += safe.fallbacks();
+    // With the check the executed step never enters the post; without a fallback
+    // the two controllers agree exactly (same seed, same samples).
+    EXPECT_FALSE(PostCost::HitsPost(0.1 * u_safe)) << "seed " << seed << ": " << u_safe.transpose();
+    if (safe.fallbacks() == 0) {
+      EXPECT_EQ(u_plain, u_safe) << "seed " << seed;
+    }
+    EXPECT_EQ(plain.fallbacks(), 0);
+  }
+  // The averaged step does enter the post for some seeds, so the check mattered.
+  EXPECT_GT(averaged_hits, 0) << "fallbacks " << fallbacks;
+  EXPECT_EQ(fallbacks, averaged_hits);
+}
+
 TEST(Mppi, BadOptionsAreNamed) {
   toy::DriftModel model(2);
   GoalCost cost(false);
@@ -121,6 +165,9 @@ TEST(Mppi, BadOptionsAreNamed) {
   EXPECT_THROW(Mppi(model, cost, o, 1), Error);
   o = PointOptions();
   o.lambda = 0;
+  EXPECT_THROW(Mppi(model, cost, o, 1), Error);
+  o = PointOptions();
+  o.fallback_margin = -1;
   EXPECT_THROW(Mppi(model, cost, o, 1), Error);
   Mppi mppi(model, cost, PointOptions(), 1);
   EXPECT_THROW(mppi.Command(Eigen::VectorXd::Zero(3)), Error);

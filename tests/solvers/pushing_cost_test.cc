@@ -83,6 +83,48 @@ TEST(PushingCostSafety, MarginCatchesAPoseFiveMillimetresAway) {
   EXPECT_THROW(ValidatePushTaskOptions(options), Error);
 }
 
+TEST(RectangleDistance, GapsBetweenEdgesAndCorners) {
+  const Rectangle obstacle = PushingCost::Obstacle();  // x in [0.55, 0.65], y in [-0.05, 0.45]
+  // Edge to edge: block x in [0.445, 0.545], 5 mm to the obstacle's left face.
+  EXPECT_NEAR(RectangleDistance({{0.495, 0.2}, {0.05, 0.05}, 0.0}, obstacle), 0.005, 1e-12);
+  // Below the lower-left corner (0.55, -0.05), diagonally: 3 cm and 4 cm apart -> 5 cm.
+  EXPECT_NEAR(RectangleDistance({{0.47, -0.14}, {0.05, 0.05}, 0.0}, obstacle), 0.05, 1e-12);
+  // A block turned by 45 degrees whose corner points at the left face from 1 cm.
+  const double half_diagonal = 0.05 * std::sqrt(2.0);
+  EXPECT_NEAR(RectangleDistance({{0.54 - half_diagonal, 0.2}, {0.05, 0.05}, std::numbers::pi / 4},
+                                obstacle),
+              0.01, 1e-12);
+  // Overlapping: 0, and symmetric in its arguments.
+  EXPECT_EQ(RectangleDistance({{0.55, 0.2}, {0.05, 0.05}, 0.3}, obstacle), 0.0);
+  const Rectangle block{{0.4, -0.1}, {0.05, 0.05}, -0.4};
+  EXPECT_DOUBLE_EQ(RectangleDistance(block, obstacle), RectangleDistance(obstacle, block));
+}
+
+TEST(PushingCostSafety, ClearanceGrowsSmoothlyTowardTheObstacle) {
+  PushingCost cost(kGoal, true);
+  cost.set_collision_substeps(4);
+  // Off by default: the step cost is the goal term alone away from the obstacle.
+  const Eigen::Vector3d far(0.3, -0.2, 0.0), near(0.48, 0.2, 0.0), nearer(0.495, 0.2, 0.0);
+  EXPECT_DOUBLE_EQ(StepCost(cost, far, near), GoalTerm(near));
+  cost.set_clearance(0.05, 2.0);
+  // 2 cm gap: 2 (1 - 0.02 / 0.05)^2 = 0.72; 5 mm: 2 (0.9)^2 = 1.62; far away: 0.
+  EXPECT_NEAR(StepCost(cost, near, near), GoalTerm(near) + 0.72, 1e-12);
+  EXPECT_NEAR(StepCost(cost, nearer, nearer), GoalTerm(nearer) + 1.62, 1e-12);
+  EXPECT_DOUBLE_EQ(StepCost(cost, far, far), GoalTerm(far));
+  // A step is charged at its closest swept pose: sliding 5 mm past the left face
+  // costs 1.62 although both of its ends are 15 cm from the obstacle.
+  const Eigen::Vector3d below(0.495, -0.25, 0.0), above(0.495, 0.65, 0.0);
+  EXPECT_NEAR(StepCost(cost, below, above), GoalTerm(above) + 1.62, 1e-12);
+  EXPECT_DOUBLE_EQ(PoseCost(cost, above), GoalTerm(above));
+  // The state form charges the end pose.
+  EXPECT_NEAR(PoseCost(cost, near), GoalTerm(near) + 0.72, 1e-12);
+  EXPECT_THROW(cost.set_clearance(-0.01, 1.0), Error);
+  EXPECT_THROW(cost.set_clearance(0.05, -1.0), Error);
+  PushTaskOptions options;
+  options.clearance_weight = -1;
+  EXPECT_THROW(ValidatePushTaskOptions(options), Error);
+}
+
 TEST(PushingCostSafety, MarginZeroWithoutSweepIsTheSeedsCostExactly) {
   // The seed's cost written out: quadratic goal term + 100 x exact overlap of the block.
   Rng rng(5);

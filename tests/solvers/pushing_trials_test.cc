@@ -80,6 +80,14 @@ TEST(PushTrials, KinematicModelPushesToTheFreeGoalInTheOdeWorld) {
     EXPECT_EQ(t.outcome, "success") << "pushes " << t.pushes;
     EXPECT_EQ(t.poses.size(), t.actions.size() + 1);
     EXPECT_EQ(static_cast<int>(t.command_ms.size()), t.pushes);
+    // The model's prediction of every executed push, F(poses[k], actions[k]).
+    ASSERT_EQ(t.predicted.size(), t.actions.size());
+    auto ws = model.MakeWorkspace(1);
+    for (std::size_t k = 0; k < t.predicted.size(); ++k) {
+      Eigen::MatrixXd next(3, 1);
+      model.PredictBatch(t.poses[k], t.actions[k], next, *ws);
+      EXPECT_EQ(t.predicted[k], Eigen::Vector3d(next.col(0))) << "push " << k;
+    }
     EXPECT_LT((t.poses.back().head<2>() - t.goal.head<2>()).norm(), o.goal_tolerance);
     // The perturbed start lies within the jitter of the free task's start.
     const Eigen::Vector3d d = t.start - PushTaskStart(false);
@@ -161,6 +169,9 @@ TEST(PushTrials, RejectsBadOptions) {
   EXPECT_THROW(RunPushTrials(model, 1, bad, 1), Error);
   bad = o;
   bad.start_xy_jitter = std::nan("");
+  EXPECT_THROW(RunPushTrials(model, 1, bad, 1), Error);
+  bad = o;
+  bad.fallback_margin = -1;
   EXPECT_THROW(RunPushTrials(model, 1, bad, 1), Error);
   WrongSizes wrong;
   EXPECT_THROW(RunPushTrials(wrong, 1, o, 1), Error);

@@ -14,6 +14,13 @@
 //       MppiCost::AccumulateStep can also look at the state before the step)
 //   4. w_k = exp(-(S_k - min_j S_j) / lambda) / sum_j exp(-(S_j - min S) / lambda)
 //   5. u_t <- u_t + sum_k w_k eps_{k,t};  execute u_0.
+//   6. (optional, off by default: MppiOptions::fallback_margin) the averaged
+//      sequence U is itself rolled out with the best sample k* = argmin S_k; if
+//      its running cost exceeds the best sample's by more than the margin, U is
+//      replaced by the best sample's sequence u + eps_{k*}. A weighted average of
+//      safe sequences need not be safe (two pushes that each clear an obstacle
+//      can average to one that hits it); this step never executes an average the
+//      model predicts to be worse than a sequence it has already evaluated.
 //
 // This is the algorithm of pytorch_mppi as the NeuralODE-Panda seed used it
 // (Sigma = 0.5 I is a covariance, lambda = 0.01, K = 1000, T = 20 for the
@@ -30,6 +37,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -70,6 +78,10 @@ struct MppiOptions {
   Eigen::VectorXd u_max;         ///< upper action bounds (m) or empty
   int threads = 0;               ///< <= 0: all cores
   int chunk_size = 125;          ///< samples per chunk (fixes the random streams)
+  /// Step 6 of the file comment: replace the averaged U by the best sample's
+  /// sequence when U's running cost exceeds the best's by more than this (cost
+  /// units, >= 0). Infinity (the default) turns the check off: pytorch_mppi's algorithm.
+  double fallback_margin = std::numeric_limits<double>::infinity();
 };
 
 /// The MPPI controller (see the file comment). Not thread-safe itself; it uses
@@ -94,6 +106,9 @@ class Mppi {
   /// Total costs S_k of the last command's samples (K).
   const Eigen::VectorXd& sample_costs() const { return costs_; }
 
+  /// Commands so far in which step 6 replaced the averaged sequence.
+  int fallbacks() const { return fallbacks_; }
+
   /// The predicted state path of the updated nominal sequence from the last
   /// command's state (n x (T + 1)), for pictures.
   Eigen::MatrixXd PredictNominal(const Eigen::Ref<const Eigen::VectorXd>& x) const;
@@ -117,6 +132,12 @@ class Mppi {
   Eigen::VectorXd costs_;          // S, K
   Eigen::VectorXd weights_;        // w, K
   Rng reset_rng_;
+  int fallbacks_ = 0;
+  // Step 6: the averaged and the best sequence rolled out side by side (n x 2, m x 2).
+  Eigen::MatrixXd check_states_, check_next_, check_actions_;
+  Eigen::MatrixXd best_sequence_;  // u + eps_{k*}, m x T
+  Eigen::VectorXd check_costs_;
+  std::unique_ptr<TransitionWorkspace> check_workspace_;
   struct ChunkScratch;
   std::vector<std::unique_ptr<ChunkScratch>> scratch_;  // one per chunk
 };

@@ -22,17 +22,25 @@
 //                theta, with the angle difference wrapped to [-pi, pi]), so a
 //                step that jumps across the obstacle is caught.
 //
-// With m = 0 and S = 0 both forms equal the seed's cost exactly.
+//   clearance    (distance c, weight w_l) adds w_l (1 - d / c)^2 while d < c, with d
+//                the distance between the true block and the obstacle (0 when they
+//                overlap), at the closest of the step's swept poses: a smooth push
+//                away from the obstacle that still ranks samples once all of them are
+//                within the margin (where the flat w_c term no longer does).
+//
+// With m = 0, S = 0 and no clearance both forms equal the seed's cost exactly.
 //
 //   diffdyn::PushingCost cost({0.8, -0.1, 0.0}, /*obstacle=*/true);
 //   cost.set_collision_margin(0.01);    // optional
 //   cost.set_collision_substeps(4);     // optional
+//   cost.set_clearance(0.05, 1.0);      // optional
 //   diffdyn::Mppi mppi(model, cost, options, seed);
 #pragma once
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include <Eigen/Core>
@@ -71,6 +79,35 @@ inline bool RectanglesOverlap(const Rectangle& r1, const Rectangle& r2) {
   return true;
 }
 
+/// Distance (m) between two oriented rectangles, 0 when they overlap: the smallest
+/// distance from a corner of one to an edge of the other.
+inline double RectangleDistance(const Rectangle& r1, const Rectangle& r2) {
+  if (RectanglesOverlap(r1, r2)) return 0.0;
+  auto corners = [](const Rectangle& r) {
+    const double c = std::cos(r.angle), s = std::sin(r.angle);
+    const Eigen::Vector2d a(c * r.half_size.x(), s * r.half_size.x());
+    const Eigen::Vector2d b(-s * r.half_size.y(), c * r.half_size.y());
+    return std::array<Eigen::Vector2d, 4>{r.center + a + b, r.center - a + b, r.center - a - b,
+                                          r.center + a - b};
+  };
+  const std::array<Eigen::Vector2d, 4> p1 = corners(r1), p2 = corners(r2);
+  double best = std::numeric_limits<double>::infinity();
+  // Corners of `p` against the edges (q_i, q_{i+1}) of `q`.
+  auto scan = [&best](const std::array<Eigen::Vector2d, 4>& p,
+                      const std::array<Eigen::Vector2d, 4>& q) {
+    for (int i = 0; i < 4; ++i) {
+      const Eigen::Vector2d a = q[i], e = q[(i + 1) % 4] - q[i];
+      for (const auto& v : p) {
+        const double f = std::clamp((v - a).dot(e) / e.squaredNorm(), 0.0, 1.0);
+        best = std::min(best, (v - a - f * e).norm());
+      }
+    }
+  };
+  scan(p1, p2);
+  scan(p2, p1);
+  return best;
+}
+
 /// The pushing cost of the file comment on batches of block poses.
 class PushingCost : public MppiCost {
  public:
@@ -99,13 +136,42 @@ class PushingCost : public MppiCost {
   }
   int collision_substeps() const { return substeps_; }
 
+  /// Clearance term of the file comment: w_l (1 - d / c)^2 while the block is
+  /// closer than c (m, >= 0) to the obstacle; c = 0 or w_l = 0 turns it off.
+  void set_clearance(double distance, double weight) {
+    DIFFDYN_CHECK(distance >= 0 && std::isfinite(distance),
+                  "clearance distance must be finite and >= 0, got ", distance);
+    DIFFDYN_CHECK(weight >= 0 && std::isfinite(weight),
+                  "clearance weight must be finite and >= 0, got ", weight);
+    clearance_ = distance;
+    clearance_weight_ = weight;
+  }
+  double clearance() const { return clearance_; }
+  double clearance_weight() const { return clearance_weight_; }
+
+  /// The clearance term at one pose (0 when off or farther than c).
+  double ClearanceTerm(double x, double y, double theta) const {
+    if (clearance_ <= 0 || clearance_weight_ <= 0) return 0.0;
+    const Rectangle o = Obstacle();
+    // Cheap reject: the block's circumscribed circle is farther than c.
+    const double ox = std::max(std::abs(x - o.center.x()) - o.half_size.x(), 0.0);
+    const double oy = std::max(std::abs(y - o.center.y()) - o.half_size.y(), 0.0);
+    const double reach = std::sqrt(2.0) * block_half_ + clearance_;
+    if (ox * ox + oy * oy >= reach * reach) return 0.0;
+    const double d = RectangleDistance({{x, y}, {block_half_, block_half_}, theta}, o);
+    if (d >= clearance_) return 0.0;
+    const double r = 1.0 - d / clearance_;
+    return clearance_weight_ * r * r;
+  }
+
   /// in_collision(pose) of the file comment (block inflated by the margin).
   bool InCollision(const Eigen::Ref<const Eigen::Vector3d>& pose) const {
     const double h = block_half_ + margin_;
     return RectanglesOverlap({pose.head<2>(), {h, h}, pose.z()}, Obstacle());
   }
 
-  /// costs(b) += (x_b - g)^T Q (x_b - g) + w_c in_collision(x_b); states: 3 x B.
+  /// costs(b) += (x_b - g)^T Q (x_b - g) + w_c in_collision(x_b) (+ the clearance
+  /// term at x_b); states: 3 x B.
   void Accumulate(const Eigen::Ref<const Eigen::MatrixXd>& states,
                   Eigen::Ref<Eigen::VectorXd> costs) const override {
     for (Eigen::Index b = 0; b < states.cols(); ++b) {
@@ -113,10 +179,12 @@ class PushingCost : public MppiCost {
       if (obstacle_ && Collides(states(0, b), states(1, b), states(2, b))) {
         costs[b] += collision_weight_;
       }
+      if (obstacle_) costs[b] += ClearanceTerm(states(0, b), states(1, b), states(2, b));
     }
   }
 
-  /// costs(b) += (x'_b - g)^T Q (x'_b - g) + w_c swept_collision(x_b -> x'_b), with
+  /// costs(b) += (x'_b - g)^T Q (x'_b - g) + w_c swept_collision(x_b -> x'_b) (+ the
+  /// largest clearance term over the swept poses), with
   /// x = prev_states(:, b), x' = states(:, b) (3 x B each) and the swept test of
   /// the file comment; equals Accumulate(states, costs) when substeps = 0.
   void AccumulateStep(const Eigen::Ref<const Eigen::MatrixXd>& prev_states,
@@ -126,6 +194,7 @@ class PushingCost : public MppiCost {
       Accumulate(states, costs);
       return;
     }
+    const bool clearance = clearance_ > 0 && clearance_weight_ > 0;
     const int poses = substeps_ + 1;
     for (Eigen::Index b = 0; b < states.cols(); ++b) {
       const double x1 = states(0, b), y1 = states(1, b), t1 = states(2, b);
@@ -134,13 +203,19 @@ class PushingCost : public MppiCost {
       const double x0 = prev_states(0, b), y0 = prev_states(1, b), t0 = prev_states(2, b);
       const double dx = x1 - x0, dy = y1 - y0;
       const double dt = std::remainder(t1 - t0, 2 * std::numbers::pi);
+      bool hit = false;
+      double closest = 0;  // the largest clearance term over the swept poses
       for (int s = 1; s <= poses; ++s) {
         const double f = double(s) / poses;
-        if (Collides(x0 + f * dx, y0 + f * dy, t0 + f * dt)) {
+        const double x = x0 + f * dx, y = y0 + f * dy, t = t0 + f * dt;
+        if (!hit && Collides(x, y, t)) {
           costs[b] += collision_weight_;
-          break;
+          hit = true;
+          if (!clearance) break;
         }
+        if (clearance) closest = std::max(closest, ClearanceTerm(x, y, t));
       }
+      costs[b] += closest;
     }
   }
 
@@ -168,6 +243,8 @@ class PushingCost : public MppiCost {
   double block_half_;
   double margin_ = 0;
   int substeps_ = 0;
+  double clearance_ = 0;
+  double clearance_weight_ = 0;
 };
 
 }  // namespace diffdyn

@@ -15,9 +15,17 @@
 // Tasks (the NeuralODE-Panda seed's):
 //   obstacle  start (0.4, 0, -0.2 pi), goal (0.8, -0.1, 0), cost with 100 x in_collision
 //             (solvers/pushing_cost.h; collision_margin and collision_substeps add the
-//             margin and the swept test, both 0 = the seed's cost)
+//             margin and the swept test, both 0 = the seed's cost; clearance adds an
+//             optional smooth term, off by default)
 //   free      start (0.4, 0, 0.2 pi),  goal (0.8, 0, 0),    no collision cost
 // MPPI: Sigma = 0.5 I, lambda = 0.01, u in [-1, 1] x [-pi/2, pi/2] x [0, 1].
+//
+// Each trial also records the model's prediction of every executed push
+// (PushTrial::predicted): next to the executed pose it separates model error from
+// controller error. The learned models meant for this task are trained on data
+// collected WITHOUT the obstacle (`diffdyn collect --starts task --obstacle off`):
+// a model trained with the obstacle in the world learns that the block stops at it,
+// so it never predicts an overlap and the collision cost cannot see a push into it.
 //
 // Trial i draws its perturbation and its MPPI seed from TrajectoryRng(seed, i)
 // (pushing_collect.h), so any subset of trials and any thread count give the
@@ -29,6 +37,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <string>
 #include <utility>
@@ -61,6 +70,13 @@ struct PushTaskOptions {
   /// seed's cost. 0.02 and 4 were picked on the obstacle task (paper_figures/mppi_obstacle).
   double collision_margin = 0.02;
   int collision_substeps = 4;        ///< PushingCost swept-test substeps S; 0: end pose only
+  /// MppiOptions::fallback_margin (solvers/mppi.h, step 6): the averaged action
+  /// sequence is replaced by the best sample's when the model predicts it to cost
+  /// more than the best plus this; infinity: off (pytorch_mppi's algorithm).
+  double fallback_margin = std::numeric_limits<double>::infinity();
+  /// PushingCost clearance term (distance c in m, weight w_l); c = 0 or w_l = 0: off.
+  double clearance = 0.0;
+  double clearance_weight = 0.0;
 };
 
 /// One trial's record.
@@ -73,7 +89,11 @@ struct PushTrial {
   Eigen::Vector3d goal = Eigen::Vector3d::Zero();
   std::vector<Eigen::Vector3d> poses;    ///< pushes + 1 block poses, poses[0] = start
   std::vector<Eigen::Vector3d> actions;  ///< pushes actions
+  /// The model's prediction of each executed push, F(poses[k], actions[k]) (pushes of
+  /// them); compared with poses[k + 1] it separates model error from controller error.
+  std::vector<Eigen::Vector3d> predicted;
   std::vector<double> command_ms;        ///< wall time of each MPPI command (ms)
+  int fallbacks = 0;                     ///< commands where MPPI kept its best sample (step 6)
 };
 
 /// Totals of RunPushTrials.
