@@ -25,7 +25,7 @@ import time
 
 import torch
 
-from torch_common import blas_in_use
+from torch_common import blas_in_use, rk4_38_flow
 
 K = 1000
 START = (0.4, 0.0, -0.2 * math.pi)
@@ -61,16 +61,7 @@ class AbsNode(torch.nn.Module):
         self.net, self.steps = net, steps
 
     def forward(self, x, u):
-        z = torch.cat([x, u], dim=1)
-        h = 1.0 / (self.steps - 1)
-        f = self.net
-        for _ in range(self.steps - 1):
-            k1 = f(z)
-            k2 = f(z + h * k1 / 3)
-            k3 = f(z + h * (k2 - k1 / 3))
-            k4 = f(z + h * (k1 - k2 + k3))
-            z = z + h * (k1 + 3 * k2 + 3 * k3 + k4) / 8
-        return z[:, :3]
+        return rk4_38_flow(self.net, torch.cat([x, u], dim=1), self.steps)[:, :3]
 
 
 class ResNn(torch.nn.Module):

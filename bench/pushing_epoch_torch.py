@@ -20,7 +20,7 @@ import time
 
 import torch
 
-from torch_common import blas_in_use
+from torch_common import blas_in_use, rk4_38_flow
 
 TRANSITIONS = 1000
 BATCH = 500
@@ -53,16 +53,7 @@ class AbsNode(torch.nn.Module):
         self.steps = steps
 
     def forward(self, x, u):
-        z = torch.cat([x, u], dim=1)
-        h = 1.0 / (self.steps - 1)
-        f = self.net
-        for _ in range(self.steps - 1):
-            k1 = f(z)
-            k2 = f(z + h * k1 / 3)
-            k3 = f(z + h * (k2 - k1 / 3))
-            k4 = f(z + h * (k1 - k2 + k3))
-            z = z + h * (k1 + 3 * k2 + 3 * k3 + k4) / 8
-        return z[:, :3]
+        return rk4_38_flow(self.net, torch.cat([x, u], dim=1), self.steps)[:, :3]
 
 
 def se2(pred, target):
