@@ -244,6 +244,21 @@ inline void VectorizedTanh(const double* x, Eigen::Index n, double* t) {
   }
 }
 
+namespace internal {
+
+// For m values z = p a[i] (m <= 64): e[i] = exp(-|z|) in (0, 1] and
+// s[i] = sigmoid(z) = 1 / (1 + exp(-z)), as 1 / (1 + e) for z >= 0 and
+// e / (1 + e) otherwise: no overflow, one division. e and s must not alias a.
+inline void SigmoidBlock(const double* a, double p, Eigen::Index m, double* e, double* s) {
+  const Eigen::Map<const Eigen::ArrayXd> av(a, m);
+  Eigen::Map<Eigen::ArrayXd> ev(e, m), sv(s, m);
+  ev = (-(p * av).abs()).exp();
+  sv = 1.0 / (1.0 + ev);
+  sv = (p * av >= 0.0).select(sv, ev * sv);
+}
+
+}  // namespace internal
+
 /// Batched evaluation over n contiguous pre-activations a[0..n):
 /// g[i] = g(a[i]), dg[i] = g'(a[i]) and, when ddg is not null, ddg[i] = g''(a[i]).
 /// g may alias a (in-place). dg may be null when only values are needed.
@@ -274,20 +289,19 @@ inline void ApplyActivation(const Activation& act, const double* a, Eigen::Index
       if (ddg) Arr(ddg, n).setZero();
       return;
     case ActivationKind::kSoftplus: {
-      // e = exp(-|p a|) in (0, 1]: no overflow; s = sigmoid(p a).
+      // z = p a; e = exp(-|z|) in (0, 1]: no overflow; s = sigmoid(z);
+      // g = (max(z, 0) + log(1 + e)) / p.
       constexpr Eigen::Index kBlock = 64;
       double e_buf[kBlock];
       double s_buf[kBlock];
       for (Eigen::Index start = 0; start < n; start += kBlock) {
         const Eigen::Index m = std::min(kBlock, n - start);
-        Eigen::Map<Eigen::ArrayXd> e(e_buf, m);
-        Eigen::Map<Eigen::ArrayXd> s(s_buf, m);
-        const auto z = p * av.segment(start, m);
-        e = (-z.abs()).exp();
-        if (dg || ddg) s = (z >= 0.0).select(1.0 / (1.0 + e), e / (1.0 + e));
-        if (dg) Arr(dg + start, m) = s;
-        if (ddg) Arr(ddg + start, m) = p * s * (1.0 - s);
-        gv.segment(start, m) = (z.max(0.0) + (1.0 + e).log()) / p;
+        internal::SigmoidBlock(a + start, p, m, e_buf, s_buf);
+        const Eigen::Map<const Eigen::ArrayXd> e(e_buf, m);
+        const Eigen::Map<const Eigen::ArrayXd> sig(s_buf, m);
+        if (dg) Arr(dg + start, m) = sig;
+        if (ddg) Arr(ddg + start, m) = p * sig * (1.0 - sig);
+        gv.segment(start, m) = ((p * av.segment(start, m)).max(0.0) + (1.0 + e).log()) / p;
       }
       return;
     }
@@ -300,15 +314,14 @@ inline void ApplyActivation(const Activation& act, const double* a, Eigen::Index
     case ActivationKind::kSigmoid: {
       constexpr Eigen::Index kBlock = 64;
       double e_buf[kBlock];
+      double s_buf[kBlock];
       for (Eigen::Index start = 0; start < n; start += kBlock) {
         const Eigen::Index m = std::min(kBlock, n - start);
-        Eigen::Map<Eigen::ArrayXd> e(e_buf, m);
-        const auto x = av.segment(start, m);
-        e = (-x.abs()).exp();
-        auto s = gv.segment(start, m);
-        s = (x >= 0.0).select(1.0 / (1.0 + e), e / (1.0 + e));
-        if (dg) Arr(dg + start, m) = s * (1.0 - s);
-        if (ddg) Arr(ddg + start, m) = s * (1.0 - s) * (1.0 - 2.0 * s);
+        internal::SigmoidBlock(a + start, 1.0, m, e_buf, s_buf);
+        const Eigen::Map<const Eigen::ArrayXd> sig(s_buf, m);
+        gv.segment(start, m) = sig;
+        if (dg) Arr(dg + start, m) = sig * (1.0 - sig);
+        if (ddg) Arr(ddg + start, m) = sig * (1.0 - sig) * (1.0 - 2.0 * sig);
       }
       return;
     }
