@@ -12,37 +12,16 @@ same run are next to --out (pushing_epoch.json), the ratios.
     OPENBLAS_NUM_THREADS=1 /usr/bin/python3 bench/pushing_epoch_torch.py --out r.json
 """
 import argparse
-import csv
 import json
-import math
 import os
 import time
 
 import torch
 
-from torch_common import blas_in_use, rk4_38_flow
+from torch_common import blas_in_use, read_transitions, rk4_38_flow, se2_pose_loss
 
 TRANSITIONS = 1000
 BATCH = 500
-RG = math.sqrt((0.1 ** 2 + 0.1 ** 2) / 12)
-
-
-def load(path):
-    """First TRANSITIONS (x_t, u_t, x_{t+1}) of the pushing CSV."""
-    rows = list(csv.DictReader(open(path)))
-    xs, us, ys = [], [], []
-    for a, b in zip(rows, rows[1:]):
-        if a["push_length"] == "" or a["trajectory"] != b["trajectory"]:
-            continue
-        xs.append([float(a[k]) for k in ("x", "y", "theta")])
-        us.append([float(a[k]) for k in ("push_location", "push_angle", "push_length")])
-        ys.append([float(b[k]) for k in ("x", "y", "theta")])
-        if len(xs) == TRANSITIONS:
-            break
-    t = lambda v: torch.tensor(v, dtype=torch.float64)
-    return t(xs), t(us), t(ys)
-
-
 class AbsNode(torch.nn.Module):
     def __init__(self, hidden=100, steps=10, method="rk4"):
         super().__init__()
@@ -56,17 +35,12 @@ class AbsNode(torch.nn.Module):
         return rk4_38_flow(self.net, torch.cat([x, u], dim=1), self.steps)[:, :3]
 
 
-def se2(pred, target):
-    d = pred - target
-    return (d[:, 0] ** 2).mean() + (d[:, 1] ** 2).mean() + RG * (d[:, 2] ** 2).mean()
-
-
 def epoch(model, opt, x, u, y, gen):
     order = torch.randperm(x.shape[0], generator=gen)
     for i in range(0, x.shape[0], BATCH):
         idx = order[i:i + BATCH]
         opt.zero_grad()
-        loss = se2(model(x[idx], u[idx]), y[idx])
+        loss = se2_pose_loss(model(x[idx], u[idx]), y[idx])
         loss.backward()
         opt.step()
     return loss.item()
@@ -85,7 +59,7 @@ def main():
     print("torch", torch.__version__, "threads", torch.get_num_threads(),
           "OPENBLAS_NUM_THREADS", os.environ.get("OPENBLAS_NUM_THREADS"))
     print("BLAS in use:", ", ".join(blas) if blas else "(none found in /proc/self/maps)")
-    x, u, y = load(args.data)
+    x, u, y = read_transitions(args.data, TRANSITIONS)
     model = AbsNode()
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
     gen = torch.Generator().manual_seed(2)

@@ -1,6 +1,9 @@
 """Helpers shared by the PyTorch reference benchmarks (bench/<name>_torch.py)."""
 
+import csv
+import math
 import os
+import sys
 
 import torch
 
@@ -29,3 +32,38 @@ def rk4_38_flow(f, z, steps):
         k4 = f(z + h * (k1 - k2 + k3))
         z = z + h * (k1 + 3 * k2 + 3 * k3 + k4) / 8
     return z
+
+
+# rg of the 0.1 m square block: sqrt((l^2 + w^2) / 12).
+POSE_RG = math.sqrt((0.1 ** 2 + 0.1 ** 2) / 12)
+
+
+def read_transitions(path, limit=None):
+    """(x_t, u_t, x_{t+1}) of a pushing CSV (DESIGN.md schema) in file order, float64
+    tensors of n x 3, the first `limit` only if given; exits with file:line on bad rows."""
+    xs, us, ys = [], [], []
+    prev = None
+    with open(path) as f:
+        for line, row in enumerate(csv.DictReader(f), start=2):
+            try:
+                state = [float(row[k]) for k in ("x", "y", "theta")]
+                action = [float(row[k]) for k in ("push_location", "push_angle", "push_length")
+                          ] if row["push_length"] else None
+                trajectory = int(row["trajectory"])
+            except (KeyError, ValueError) as e:
+                sys.exit(f"error: {path}:{line}: {e}")
+            if prev is not None and prev[0] == trajectory and prev[2] is not None:
+                xs.append(prev[1])
+                us.append(prev[2])
+                ys.append(state)
+                if limit is not None and len(xs) == limit:
+                    break
+            prev = (trajectory, state, action)
+    t = lambda v: torch.tensor(v, dtype=torch.float64)
+    return t(xs), t(us), t(ys)
+
+
+def se2_pose_loss(pred, target):
+    """MSE x + MSE y + rg MSE theta over a batch of poses (n x 3)."""
+    d2 = (pred - target) ** 2
+    return d2[:, 0].mean() + d2[:, 1].mean() + POSE_RG * d2[:, 2].mean()

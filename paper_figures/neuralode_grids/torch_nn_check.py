@@ -13,37 +13,15 @@ seeds is what compares.
 """
 import argparse
 import csv
-import math
+import os
 import statistics
 import sys
 
-import numpy as np
 import torch
 
-
-def read_transitions(path):
-    trajectories = {}
-    with open(path) as f:
-        for line, row in enumerate(csv.DictReader(f), start=2):
-            try:
-                values = [float(row[k]) if row[k] else math.nan
-                          for k in ("x", "y", "theta", "push_location", "push_angle", "push_length")]
-                trajectories.setdefault(int(row["trajectory"]), []).append(values)
-            except (KeyError, ValueError) as e:
-                sys.exit(f"error: {path}:{line}: {e}")
-    x, u, y = [], [], []
-    for states in trajectories.values():
-        for k in range(len(states) - 1):
-            x.append(states[k][:3])
-            u.append(states[k][3:])
-            y.append(states[k + 1][:3])
-    return (torch.tensor(np.array(a), dtype=torch.float64) for a in (x, u, y))
-
-
-def pose_loss(pred, target):
-    rg = math.sqrt((0.1 ** 2 + 0.1 ** 2) / 12.0)
-    d2 = (pred - target) ** 2
-    return d2[:, 0].mean() + d2[:, 1].mean() + rg * d2[:, 2].mean()
+# One transition reader and one SE(2) loss for every PyTorch script (bench/torch_common.py).
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "bench"))
+from torch_common import read_transitions, se2_pose_loss  # noqa: E402
 
 
 def train(x, u, y, residual, epochs, seed):
@@ -65,10 +43,10 @@ def train(x, u, y, residual, epochs, seed):
         for b in range(0, len(order), 500):
             idx = order[b:b + 500]
             opt.zero_grad()
-            pose_loss(predict(idx), y[idx]).backward()
+            se2_pose_loss(predict(idx), y[idx]).backward()
             opt.step()
     with torch.no_grad():
-        return float(pose_loss(predict(val), y[val]))
+        return float(se2_pose_loss(predict(val), y[val]))
 
 
 def main():

@@ -36,6 +36,20 @@ void openblas_set_num_threads(int num_threads) __attribute__((weak));
 
 namespace diffdyn {
 
+#if defined(DIFFDYN_HAVE_BLAS)
+namespace internal {
+// Sets OpenBLAS (if linked) to one thread, once per process, whatever the
+// Gemm instantiation that asks first.
+inline void UseOneBlasThread() {
+  static const bool once = [] {
+    if (openblas_set_num_threads != nullptr) openblas_set_num_threads(1);
+    return true;
+  }();
+  (void)once;
+}
+}  // namespace internal
+#endif
+
 /// Whether Gemm calls an external BLAS (true) or Eigen's products (false).
 constexpr bool GemmUsesBlas() {
 #if defined(DIFFDYN_HAVE_BLAS)
@@ -75,11 +89,7 @@ void Gemm(double alpha, const Eigen::MatrixBase<DA>& a, bool transpose_a,
     return;
   }
 #if defined(DIFFDYN_HAVE_BLAS)
-  static const bool kSingleThreaded = [] {
-    if (openblas_set_num_threads != nullptr) openblas_set_num_threads(1);
-    return true;
-  }();
-  (void)kSingleThreaded;
+  internal::UseOneBlasThread();
   const char ta = transpose_a ? 'T' : 'N';
   const char tb = transpose_b ? 'T' : 'N';
   const int mi = static_cast<int>(m), ni = static_cast<int>(n), ki = static_cast<int>(k);
