@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <exception>
@@ -45,8 +46,18 @@ namespace internal {
 /// reused (a thread start costs ~25 us, as much as a small batched product).
 /// One loop at a time: TryRun returns false when the pool is busy (a nested
 /// or concurrent loop), and that caller starts threads of its own.
+///
+/// Hand-over spins before it sleeps: waking a sleeping thread through the
+/// kernel costs 50-300 us on a virtual machine (measured here: a batch of 500
+/// through a 6-100-100-6 network took 0.9 ms on two threads and 1.0 ms on
+/// one), so an idle helper, and the caller waiting for the helpers, poll for
+/// up to kSpin (yielding the core to other work between polls) before they
+/// block on a condition variable.
 class WorkerPool {
  public:
+  /// How long an idle thread polls before it sleeps.
+  static constexpr std::chrono::microseconds kSpin{2000};
+
   /// The pool (threads are added when a loop asks for more than it has).
   static WorkerPool& Instance() {
     static WorkerPool pool;
@@ -58,6 +69,7 @@ class WorkerPool {
   /// job must not throw.
   template <typename Job>
   bool TryRun(int helpers, Job& job) {
+    if (helpers > 0xffff) return false;
     std::unique_lock<std::mutex> busy(run_mutex_, std::try_to_lock);
     if (!busy.owns_lock()) return false;
     {
@@ -67,14 +79,19 @@ class WorkerPool {
         threads_.emplace_back([this, index] { Loop(index); });
       }
       job_ = [&job] { job(); };
-      wanted_ = helpers;
-      running_ = helpers;
-      ++generation_;
+      running_.store(helpers, std::memory_order_relaxed);
+      // Generation and helper count in one word, so a helper never pairs one
+      // loop's generation with another loop's count.
+      const std::uint64_t generation = (state_.load(std::memory_order_relaxed) >> 16) + 1;
+      state_.store((generation << 16) | static_cast<std::uint64_t>(helpers),
+                   std::memory_order_release);
     }
     start_.notify_all();
     job();
-    std::unique_lock<std::mutex> lock(mutex_);
-    done_.wait(lock, [this] { return running_ == 0; });
+    if (!SpinUntil([this] { return running_.load(std::memory_order_acquire) == 0; })) {
+      std::unique_lock<std::mutex> lock(mutex_);
+      done_.wait(lock, [this] { return running_.load(std::memory_order_acquire) == 0; });
+    }
     job_ = nullptr;
     return true;
   }
@@ -82,7 +99,7 @@ class WorkerPool {
   ~WorkerPool() {
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      stop_ = true;
+      stop_.store(true, std::memory_order_release);
     }
     start_.notify_all();
     for (std::thread& t : threads_) t.join();
@@ -91,29 +108,50 @@ class WorkerPool {
  private:
   WorkerPool() = default;
 
+  // Polls ready() for up to kSpin; true as soon as it holds.
+  template <typename Ready>
+  static bool SpinUntil(Ready ready) {
+    const auto deadline = std::chrono::steady_clock::now() + kSpin;
+    for (int polls = 0;; ++polls) {
+      if (ready()) return true;
+      if ((polls & 63) == 63) {
+        if (std::chrono::steady_clock::now() > deadline) return ready();
+        std::this_thread::yield();
+      }
+    }
+  }
+
   void Loop(int index) {
-    std::uint64_t seen = 0;
-    std::unique_lock<std::mutex> lock(mutex_);
+    std::uint64_t seen = 0;  // the last generation this thread saw
     for (;;) {
-      start_.wait(lock, [&] { return stop_ || generation_ != seen; });
-      if (stop_) return;
-      seen = generation_;
-      if (index >= wanted_) continue;
-      lock.unlock();
+      auto fresh = [&] {
+        return stop_.load(std::memory_order_acquire) ||
+               (state_.load(std::memory_order_acquire) >> 16) != seen;
+      };
+      if (!SpinUntil(fresh)) {
+        std::unique_lock<std::mutex> lock(mutex_);
+        start_.wait(lock, fresh);
+      }
+      if (stop_.load(std::memory_order_acquire)) return;
+      const std::uint64_t state = state_.load(std::memory_order_acquire);
+      seen = state >> 16;
+      if (index >= static_cast<int>(state & 0xffff)) continue;
       job_();
-      lock.lock();
-      if (--running_ == 0) done_.notify_one();
+      if (running_.fetch_sub(1, std::memory_order_acq_rel) == 1) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        done_.notify_one();
+      }
     }
   }
 
   std::mutex run_mutex_;  // held by the loop using the pool
-  std::mutex mutex_;      // guards everything below
+  std::mutex mutex_;      // guards threads_, job_ writes and the sleeps
   std::condition_variable start_, done_;
   std::vector<std::thread> threads_;
   std::function<void()> job_;
-  int wanted_ = 0, running_ = 0;
-  std::uint64_t generation_ = 0;
-  bool stop_ = false;
+  std::atomic<std::uint64_t> state_{0};  // generation << 16 | helpers wanted
+  std::atomic<int> running_{0};          // helpers still in job_
+  std::atomic<bool> stop_{false};
 };
 
 }  // namespace internal
