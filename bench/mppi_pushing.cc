@@ -108,7 +108,7 @@ BENCHMARK(BM_MppiResNn)
 
 void BM_MppiChunks(benchmark::State& state) { RunCommands(state, AbsNode(), 36); }
 BENCHMARK(BM_MppiChunks)
-    ->Args({20, 2, 250})->Args({20, 2, 500})
+    ->Args({20, 2, 125})->Args({20, 2, 500})
     ->UseRealTime()->MeasureProcessCPUTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 void BM_PeakDgemm2Threads(benchmark::State& state) { bench::PeakDgemm2Threads(state); }

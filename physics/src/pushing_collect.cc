@@ -13,17 +13,10 @@ namespace {
 
 constexpr int kChunk = 4;  // trajectories per chunk (one PushingEnv each)
 
-std::uint64_t SplitMix64(std::uint64_t x) {
-  x += 0x9E3779B97F4A7C15ULL;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-  return x ^ (x >> 31);
-}
-
 }  // namespace
 
 Rng TrajectoryRng(std::uint64_t seed, std::uint64_t index) {
-  return Rng(SplitMix64(SplitMix64(seed) ^ index));
+  return Rng(SplitMix64Hash(SplitMix64Hash(seed) ^ index));
 }
 
 Eigen::Vector3d SampleStartPose(StartDistribution starts, Rng& rng) {

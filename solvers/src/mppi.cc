@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <numbers>
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/parallel.h"
@@ -14,18 +13,15 @@ namespace diffdyn {
 // Per-chunk buffers: states, actions and the model's workspace, sized once.
 struct Mppi::ChunkScratch {
   Eigen::MatrixXd states, next, actions;
-  Eigen::VectorXd standard_normal;  // m x width x T normals of one command
+  Eigen::VectorXd standard_normal;  // m x T normals per sample, sample after sample
   std::unique_ptr<TransitionWorkspace> workspace;
 };
 
 namespace {
 
-// SplitMix64 finaliser: decorrelates the seeds of the per-chunk generators.
+// The seed of stream b of stream family a (the command, or ~0 for resets).
 std::uint64_t MixSeed(std::uint64_t seed, std::uint64_t a, std::uint64_t b) {
-  std::uint64_t z = seed + 0x9E3779B97F4A7C15ULL * (a + 1) + 0xBF58476D1CE4E5B9ULL * (b + 1);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-  return z ^ (z >> 31);
+  return SplitMix64Hash(SplitMix64Hash(SplitMix64Hash(seed) ^ a) ^ b);
 }
 
 }  // namespace
@@ -120,17 +116,13 @@ void Mppi::RolloutChunk(int chunk, int begin, int end, const Eigen::VectorXd& x)
   ChunkScratch& s = *scratch_[chunk];
   const int width = end - begin;
   const int m = m_;
-  // All standard normals of the chunk at once, by Box-Muller pairs (both outputs used).
-  Rng rng(MixSeed(seed_, commands_, static_cast<std::uint64_t>(chunk)));
+  // The m x T standard normals of each sample from the sample's own stream, so the
+  // draws depend on (seed, command, sample) only, never on the chunking.
+  const Eigen::Index per_sample = Eigen::Index(m) * options_.horizon;
   double* z = s.standard_normal.data();
-  const Eigen::Index count = s.standard_normal.size();
-  for (Eigen::Index i = 0; i < count; i += 2) {
-    const double u1 = 1.0 - UniformUnit(rng);  // in (0, 1]
-    const double u2 = UniformUnit(rng);
-    const double r = std::sqrt(-2.0 * std::log(u1));
-    const double a = 2.0 * std::numbers::pi * u2;
-    z[i] = r * std::cos(a);
-    if (i + 1 < count) z[i + 1] = r * std::sin(a);
+  for (int k = 0; k < width; ++k) {
+    SplitMix64 stream(MixSeed(seed_, commands_, static_cast<std::uint64_t>(begin + k)));
+    FillStandardNormal(stream, z + k * per_sample, per_sample);
   }
   const bool lower = options_.u_min.size() == m, upper = options_.u_max.size() == m;
   const double* chol = chol_.data();  // column-major, lower triangular
@@ -143,9 +135,8 @@ void Mppi::RolloutChunk(int chunk, int begin, int end, const Eigen::VectorXd& x)
     double* eps = noise_[t].data() + Eigen::Index(begin) * m;
     const double* u = nominal_.col(t).data();
     const double* wu = weighted_nominal_.col(t).data();
-    const double* e_t = z + Eigen::Index(t) * width * m;
     for (int k = 0; k < width; ++k) {
-      const double* e = e_t + Eigen::Index(k) * m;
+      const double* e = z + k * per_sample + Eigen::Index(t) * m;
       double* a = s.actions.col(k).data();
       double perturbation_cost = 0;
       for (int i = 0; i < m; ++i) {

@@ -94,19 +94,41 @@ TEST(Mppi, SameSeedSameCommandsAtAnyThreadCount) {
   }
 }
 
+// Each sample has its own random stream: regrouping the samples into other
+// chunks (here 64 -> 37, a width that leaves a ragged last chunk) changes no
+// draw, and with a model whose columns do not interact, no bit of the command.
+TEST(Mppi, ChunkSizeDoesNotChangeTheDraws) {
+  toy::DriftModel model(2);
+  GoalCost cost(true);
+  Mppi a(model, cost, PointOptions(), 4);
+  Mppi b(model, cost, [] { auto o = PointOptions(); o.chunk_size = 37; o.threads = 2; return o; }(), 4);
+  const Eigen::Vector2d x(0.2, 0.1);
+  for (int i = 0; i < 5; ++i) EXPECT_EQ(a.Command(x), b.Command(x));
+}
+
 TEST(Mppi, WeightsFavourLowCostSamples) {
-  // With a tiny temperature the update follows the single best sample.
+  // With a tiny temperature the update follows the single best sample: the new
+  // nominal sequence is that sample's actions, so its predicted path costs the
+  // lowest sample cost (up to the perturbation term, ~1e-5 at this lambda).
   toy::DriftModel model(2);
   GoalCost cost(false);
   MppiOptions o = PointOptions();
   o.lambda = 1e-6;
-  Mppi mppi(model, cost, o, 1);
-  const Eigen::VectorXd u = mppi.Command(Eigen::Vector2d(0, 0));
-  EXPECT_GT(u.x(), 0.5);  // toward the goal at (1, 0)
-  EXPECT_EQ(mppi.sample_costs().size(), o.samples);
-  const Eigen::MatrixXd path = mppi.PredictNominal(Eigen::Vector2d(0, 0));
-  EXPECT_EQ(path.cols(), o.horizon + 1);
-  EXPECT_GT(path(0, o.horizon), path(0, 0));
+  for (std::uint64_t seed : {1, 2, 3}) {
+    Mppi mppi(model, cost, o, seed);
+    mppi.Command(Eigen::Vector2d(0, 0));
+    ASSERT_EQ(mppi.sample_costs().size(), o.samples);
+    const Eigen::MatrixXd path = mppi.PredictNominal(Eigen::Vector2d(0, 0));
+    ASSERT_EQ(path.cols(), o.horizon + 1);
+    Eigen::VectorXd path_cost = Eigen::VectorXd::Zero(1);
+    for (int t = 1; t <= o.horizon; ++t) cost.Accumulate(path.col(t), path_cost);
+    const Eigen::VectorXd& costs = mppi.sample_costs();
+    EXPECT_NEAR(path_cost[0], costs.minCoeff(), 1e-3) << "seed " << seed;
+    Eigen::VectorXd sorted = costs;
+    std::sort(sorted.data(), sorted.data() + sorted.size());
+    EXPECT_LT(path_cost[0], sorted[sorted.size() / 2]) << "seed " << seed;
+    EXPECT_GT(path(0, o.horizon), path(0, 0)) << "seed " << seed;  // toward (1, 0)
+  }
 }
 
 // One step toward (1, 0) with a post right ahead: a sample passes above or below it,

@@ -26,10 +26,12 @@
 // (Sigma = 0.5 I is a covariance, lambda = 0.01, K = 1000, T = 20 for the
 // obstacle task).
 //
-// Rollouts use the model's batched double path. Samples are cut into fixed
-// chunks; chunk c draws its noise from its own generator seeded by (seed,
-// command index, c), so the result is identical at any thread count, and the
-// chunks run on all cores with one model workspace each. Every buffer is sized
+// Rollouts use the model's batched double path. Sample k draws its noise from
+// its own SplitMix64 stream seeded by (seed, command index, k), so the draws
+// do not depend on how samples are grouped. Samples are cut into fixed chunks
+// (chunk_size only sets the width of the batched products) that run on all
+// cores with one model workspace each: the result is identical at any thread
+// count. Every buffer is sized
 // once at construction: a command allocates nothing.
 //
 //   diffdyn::Mppi mppi(model, cost, diffdyn::MppiOptions{}, /*seed=*/1);
@@ -77,7 +79,7 @@ struct MppiOptions {
   Eigen::VectorXd u_min;         ///< lower action bounds (m) or empty
   Eigen::VectorXd u_max;         ///< upper action bounds (m) or empty
   int threads = 0;               ///< <= 0: all cores
-  int chunk_size = 125;          ///< samples per chunk (fixes the random streams)
+  int chunk_size = 250;          ///< samples per rollout chunk (speed only: each sample has its own random stream)
   /// Step 6 of the file comment: replace the averaged U by the best sample's
   /// sequence when U's running cost exceeds the best's by more than this (cost
   /// units, >= 0). Infinity (the default) turns the check off: pytorch_mppi's algorithm.
