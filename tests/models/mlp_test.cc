@@ -329,7 +329,37 @@ TEST(Mlp, AccumulatingBackwardAddsTheSameGradient) {
                 1e-12 * (1.0 + acc.cwiseAbs().maxCoeff()));
       EXPECT_TRUE(longer.tail(5).isZero(0.0));
       EXPECT_TRUE(gx_acc == gx);
+      // Cotangent buffers from a wider scratch workspace: the same bits, and the
+      // forward workspace's own buffers stay untouched.
+      MlpWorkspace scratch(arch, batch, chunk + 7, false);
+      Eigen::VectorXd via_scratch = start;
+      Eigen::MatrixXd gx_scratch;
+      net.BackwardAccumulate(gy, via_scratch, &gx_scratch, &ws, threads, &scratch);
+      EXPECT_TRUE(via_scratch == longer.head(arch.num_parameters()));
+      EXPECT_TRUE(gx_scratch == gx);
     }
+  }
+  // ReLU keeps no g' on a plain forward pass (it is read off the layer output);
+  // the gradients equal those after a forward pass that stored g' for the Jacobian.
+  {
+    MlpWorkspace plain(arch, batch, 32, false), with_jacobian(arch, batch, 32, true);
+    Eigen::MatrixXd Y1, Y2, J, gx1, gx2;
+    Eigen::VectorXd g1, g2;
+    net.Forward(X, &Y1, nullptr, &plain, 2);
+    net.Forward(X, &Y2, &J, &with_jacobian, 2);
+    net.Backward(gy, Eigen::MatrixXd(), &g1, &gx1, &plain, 2);
+    net.Backward(gy, Eigen::MatrixXd(), &g2, &gx2, &with_jacobian, 2);
+    EXPECT_TRUE(Y1 == Y2);
+    EXPECT_TRUE(g1 == g2);
+    EXPECT_TRUE(gx1 == gx2);
+  }
+  // A scratch workspace with narrower chunks than the forward one is refused.
+  {
+    MlpWorkspace ws(arch, batch, 32, false), narrow(arch, batch, 16, false);
+    Eigen::MatrixXd Y;
+    net.Forward(X, &Y, nullptr, &ws);
+    Eigen::VectorXd acc = start;
+    EXPECT_THROW(net.BackwardAccumulate(gy, acc, nullptr, &ws, 1, &narrow), Error);
   }
   // Accumulating into a vector of the wrong size is an error, not a resize.
   MlpWorkspace ws(arch, batch, batch, false);

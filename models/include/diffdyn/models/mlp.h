@@ -152,6 +152,7 @@ class MlpWorkspace {
   struct Chunk {
     std::vector<Eigen::MatrixXd> h;    // h_l, n_l x cap, l = 0 .. L-1
     std::vector<Eigen::MatrixXd> dg;   // g'(a_l), hidden layers
+    std::vector<char> dg_stored;       // per hidden layer: dg written by the last Forward
     std::vector<Eigen::MatrixXd> ddg;  // g''(a_l), hidden layers (Jacobian mode)
     std::vector<Eigen::MatrixXd> u;    // U_l, n_{l+1} x n_0 cap (Jacobian mode)
     std::vector<Eigen::MatrixXd> z;    // Z_l, n_l x n_0 cap, l >= 1 (Jacobian mode)
@@ -169,6 +170,7 @@ class MlpWorkspace {
       const int width = arch.max_width();
       h.resize(layers);
       dg.resize(layers - 1);
+      dg_stored.assign(layers - 1, 0);
       for (int l = 0; l < layers; ++l) h[l].resize(arch.sizes[l], cap);
       for (int l = 0; l + 1 < layers; ++l) dg[l].resize(arch.sizes[l + 1], cap);
       abar[0].resize(width, cap);
@@ -424,16 +426,19 @@ class Mlp {
   /// Backward with an output cotangent only, adding dL/dtheta to grad_params
   /// (size num_parameters(), e.g. a segment of a larger vector) and writing
   /// dL/dX to grad_inputs (may be null). No copies of gy; for ODE adjoints that
-  /// sum the parameter gradient over many evaluations.
+  /// sum the parameter gradient over many evaluations. With `scratch` (a
+  /// workspace whose chunk size is at least ws's), the reverse sweep's cotangent buffers
+  /// come from it instead of ws: many recorded forward passes (the stages of an
+  /// ODE tape) then share one set of buffers that stays in cache.
   void BackwardAccumulate(const Eigen::Ref<const Eigen::MatrixXd>& gy,
                           Eigen::Ref<Eigen::VectorXd> grad_params, Eigen::MatrixXd* grad_inputs,
-                          MlpWorkspace* ws, int threads = 1) const
+                          MlpWorkspace* ws, int threads = 1, MlpWorkspace* scratch = nullptr) const
     requires std::is_same_v<T, double>
   {
     DIFFDYN_CHECK(grad_params.size() == num_parameters(), "Mlp::BackwardAccumulate: gradient has ",
                   grad_params.size(), " entries, expected ", num_parameters());
     static const Eigen::MatrixXd kNone;
-    BackwardImpl(gy, kNone, grad_params.data(), true, grad_inputs, ws, threads);
+    BackwardImpl(gy, kNone, grad_params.data(), true, grad_inputs, ws, threads, scratch);
   }
 
   /// Input Jacobians by batched reverse mode (n_L backward sweeps stacked into
@@ -457,6 +462,11 @@ class Mlp {
       MlpWorkspace::Chunk& ch = ws->chunks_[c];
       const int nb = end - begin;
       const int width = arch_.max_width();
+      for (int l = 0; l + 1 < L; ++l) {  // ReLU layers: g' = [h_{l+1} > 0]
+        if (!ch.dg_stored[l]) {
+          ch.dg[l].leftCols(nb) = (ch.h[l + 1].leftCols(nb).array() > 0.0).template cast<double>();
+        }
+      }
       for (Eigen::MatrixXd& buffer : ch.ubar) {
         if (buffer.rows() < width || buffer.cols() < Eigen::Index(m) * cap) {
           buffer.resize(width, std::max(buffer.cols(), Eigen::Index(m) * cap));
@@ -529,8 +539,12 @@ class Mlp {
         auto a = ch->h[l + 1].leftCols(nb);
         a.colwise() = b(l);
         Gemm(1.0, W(l), false, ch->h[l].leftCols(nb), false, 1.0, a);
-        ApplyActivation(arch_.activations[l], a.data(), a.size(), a.data(), ch->dg[l].data(),
-                        jac ? ch->ddg[l].data() : nullptr);
+        // ReLU's g' = [g > 0] is read off h_{l+1} in the backward pass: not stored
+        // unless the Jacobian chain needs it (half the memory traffic of a tape).
+        const bool store_dg = jac || arch_.activations[l].kind != ActivationKind::kRelu;
+        ApplyActivation(arch_.activations[l], a.data(), a.size(), a.data(),
+                        store_dg ? ch->dg[l].data() : nullptr, jac ? ch->ddg[l].data() : nullptr);
+        ch->dg_stored[l] = store_dg;
       } else {
         y.colwise() = b(l);
         Gemm(1.0, W(l), false, ch->h[l].leftCols(nb), false, 1.0, y);
@@ -560,8 +574,10 @@ class Mlp {
   // overwritten, or added to if `accumulate`.
   template <typename GyMatrix>
   void BackwardImpl(const GyMatrix& gy, const Eigen::MatrixXd& gjac, double* grad, bool accumulate,
-                    Eigen::MatrixXd* grad_inputs, MlpWorkspace* ws, int threads) const {
+                    Eigen::MatrixXd* grad_inputs, MlpWorkspace* ws, int threads,
+                    MlpWorkspace* scratch = nullptr) const {
     DIFFDYN_CHECK(ws != nullptr, "Mlp::Backward needs a workspace");
+    if (scratch == nullptr) scratch = ws;
     const int batch = ws->batch_;
     const int n0 = num_inputs();
     const bool has_gy = gy.size() > 0;
@@ -582,32 +598,39 @@ class Mlp {
     const int chunks = NumChunks(batch, ws->chunk_size());
     // One chunk writes straight into grad; several write their own slots.
     const bool direct = chunks <= 1;
+    if (scratch != ws) {
+      DIFFDYN_CHECK(scratch->chunk_size() >= ws->chunk_size(), "Mlp::Backward: scratch chunk size ",
+                    scratch->chunk_size(), " is below the workspace's ", ws->chunk_size());
+      scratch->Reserve(arch_, chunks * scratch->chunk_size(), false);
+    }
     ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
-      MlpWorkspace::Chunk& ch = ws->chunks_[c];
+      MlpWorkspace::Chunk& buf = scratch->chunks_[c];
       BackwardChunk(has_gy ? &gy : nullptr, has_gj ? &gjac : nullptr, begin, end - begin,
-                    grad != nullptr, direct && grad ? grad : ch.grad.data(), direct && accumulate,
-                    grad_inputs, &ch);
+                    grad != nullptr, direct && grad ? grad : buf.grad.data(), direct && accumulate,
+                    grad_inputs, &ws->chunks_[c], &buf);
     });
     if (grad == nullptr) return;
     Eigen::Map<Eigen::VectorXd> g(grad, p);
     if (!accumulate && (batch == 0 || !direct)) g.setZero();
     // Chunk gradients summed in chunk order: identical at any thread count.
     if (!direct) {
-      for (int c = 0; c < chunks; ++c) g += ws->chunks_[c].grad;
+      for (int c = 0; c < chunks; ++c) g += scratch->chunks_[c].grad;
     }
   }
 
   // Parameter gradients go to grad_out (num_parameters()), added if `accumulate`.
+  // ch holds the forward pass; buf the cotangents abar (may be ch).
   template <typename GyMatrix>
   void BackwardChunk(const GyMatrix* gy, const Eigen::MatrixXd* gjac, int begin, int nb,
                      bool want_params, double* grad_out, bool accumulate,
-                     Eigen::MatrixXd* grad_inputs, MlpWorkspace::Chunk* ch) const {
+                     Eigen::MatrixXd* grad_inputs, MlpWorkspace::Chunk* ch,
+                     MlpWorkspace::Chunk* buf) const {
     const int L = arch_.num_layers();
     const int n0 = num_inputs();
     const Eigen::Index nz = Eigen::Index(n0) * nb;
     int cur = 0;
     const int m = num_outputs();
-    auto abar = [&](int which, int rows) { return ch->abar[which].topLeftCorner(rows, nb); };
+    auto abar = [&](int which, int rows) { return buf->abar[which].topLeftCorner(rows, nb); };
     auto ubar = [&](int which, int rows) { return ch->ubar[which].topLeftCorner(rows, nz); };
     if (gy) {
       abar(cur, m) = gy->middleCols(begin, nb);
@@ -646,7 +669,11 @@ class Mlp {
       const int nxt = 1 - cur;
       auto next_abar = abar(nxt, cols);
       Gemm(1.0, W(l), true, abar(cur, rows), false, 0.0, next_abar);
-      next_abar.array() *= ch->dg[l - 1].leftCols(nb).array();
+      if (ch->dg_stored[l - 1]) {
+        next_abar.array() *= ch->dg[l - 1].leftCols(nb).array();
+      } else {  // ReLU: g' = [h_l > 0], the same products as with a stored g'
+        next_abar.array() *= (ch->h[l].leftCols(nb).array() > 0.0).template cast<double>();
+      }
       if (gjac) {
         auto zbar = ch->zbar.topLeftCorner(cols, nz);
         Gemm(1.0, W(l), true, ubar(cur, rows), false, 0.0, zbar);

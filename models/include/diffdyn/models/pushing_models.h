@@ -238,7 +238,10 @@ struct MlpOdeSystem {
       forward = &ws.mlp;
     }
     // dL/dtheta goes straight into grad_theta (the sum over the solver's stages).
-    net->BackwardAccumulate(lambda, grad_theta, &ws.grad_input, forward);
+    // The cotangent buffers of ws.mlp serve every cached stage (when wide enough).
+    const bool shared = forward != &ws.mlp && ws.mlp.chunk_size() >= forward->chunk_size();
+    net->BackwardAccumulate(lambda, grad_theta, &ws.grad_input, forward, 1,
+                            shared ? &ws.mlp : nullptr);
     vjp_z = ws.grad_input;
   }
 };
