@@ -7,7 +7,8 @@
 //   BM_MppiResNn/30/threads    res-NN 6-100-100-3 ReLU, T = 30
 //   (a third argument is the chunk size, 0 = MppiOptions' default; BM_MppiChunks
 //    tries others at T = 20 on 2 threads)
-//   BM_PeakDgemm2Threads       the machine's two-thread dgemm peak (peak_dgemm.h)
+//   BM_PeakDgemm*2Threads      the machine's two-thread dgemm peak, Eigen and OpenBLAS
+//                              (peak_dgemm.h); the best of the two is the peak
 //
 // The models have fixed-seed random weights; they are written as model files
 // (mppi_abs_node.json, mppi_res_nn.json) next to the benchmark output (the directory
@@ -113,6 +114,11 @@ BENCHMARK(BM_MppiChunks)
 
 void BM_PeakDgemm2Threads(benchmark::State& state) { bench::PeakDgemm2Threads(state); }
 BENCHMARK(BM_PeakDgemm2Threads)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
+
+void BM_PeakDgemmOpenBlas2Threads(benchmark::State& state) {
+  bench::PeakDgemmOpenBlas2Threads(state);
+}
+BENCHMARK(BM_PeakDgemmOpenBlas2Threads)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 // The directory the results go to: that of --benchmark_out=..., else $BENCH_OUT,
 // else build/bench-results (scripts/run-bench's default).

@@ -185,10 +185,11 @@ def main():
     if not os.path.exists(ours_path):
         return
     bench = json.load(open(ours_path))["benchmarks"]
-    peak = None
+    peak = None  # the best two-thread dgemm, Eigen or OpenBLAS
     for b in bench:
-        if b["name"].startswith("BM_PeakDgemm2Threads"):
-            peak = b.get("GFLOP/s")
+        if b["name"].startswith(("BM_PeakDgemm2Threads", "BM_PeakDgemmOpenBlas2Threads")):
+            if b.get("GFLOP/s") and (peak is None or b["GFLOP/s"] > peak):
+                peak = b["GFLOP/s"]
     for name, _, horizon, prefix in cases:
         wall, cpu = timings[name]
         for threads in (1, 2):
