@@ -183,7 +183,8 @@ Eigen::VectorXd Mppi::Command(const Eigen::Ref<const Eigen::VectorXd>& x_in) {
   }
 
   // 4. Weights.
-  const double best = costs_.minCoeff();
+  Eigen::Index best_sample = 0;
+  const double best = costs_.minCoeff(&best_sample);
   weights_ = (-(costs_.array() - best) / options_.lambda).exp();
   weights_ /= weights_.sum();
 
@@ -192,8 +193,6 @@ Eigen::VectorXd Mppi::Command(const Eigen::Ref<const Eigen::VectorXd>& x_in) {
   // only removes rounding (a push length of -3e-20, say).
   // The best sample's sequence u + eps_{k*} (already within the bounds), for step 6.
   if (check_workspace_) {
-    Eigen::Index best_sample = 0;
-    costs_.minCoeff(&best_sample);
     for (int t = 0; t < T; ++t) best_sequence_.col(t) = nominal_.col(t) + noise_[t].col(best_sample);
   }
   for (int t = 0; t < T; ++t) nominal_.col(t).noalias() += noise_[t] * weights_;

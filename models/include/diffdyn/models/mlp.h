@@ -152,7 +152,6 @@ class MlpWorkspace {
   struct Chunk {
     std::vector<Eigen::MatrixXd> h;    // h_l, n_l x cap, l = 0 .. L-1
     std::vector<Eigen::MatrixXd> dg;   // g'(a_l), hidden layers
-    std::vector<char> dg_stored;       // per hidden layer: dg written by the last Forward
     std::vector<Eigen::MatrixXd> ddg;  // g''(a_l), hidden layers (Jacobian mode)
     std::vector<Eigen::MatrixXd> u;    // U_l, n_{l+1} x n_0 cap (Jacobian mode)
     std::vector<Eigen::MatrixXd> z;    // Z_l, n_l x n_0 cap, l >= 1 (Jacobian mode)
@@ -170,7 +169,6 @@ class MlpWorkspace {
       const int width = arch.max_width();
       h.resize(layers);
       dg.resize(layers - 1);
-      dg_stored.assign(layers - 1, 0);
       for (int l = 0; l < layers; ++l) h[l].resize(arch.sizes[l], cap);
       for (int l = 0; l + 1 < layers; ++l) dg[l].resize(arch.sizes[l + 1], cap);
       abar[0].resize(width, cap);
@@ -462,10 +460,8 @@ class Mlp {
       MlpWorkspace::Chunk& ch = ws->chunks_[c];
       const int nb = end - begin;
       const int width = arch_.max_width();
-      for (int l = 0; l + 1 < L; ++l) {  // ReLU layers: g' = [h_{l+1} > 0]
-        if (!ch.dg_stored[l]) {
-          ch.dg[l].leftCols(nb) = (ch.h[l + 1].leftCols(nb).array() > 0.0).template cast<double>();
-        }
+      for (int l = 0; l + 1 < L; ++l) {
+        if (DerivativeFromOutput(ch, l)) ch.dg[l].leftCols(nb) = ReluDerivative(ch, l, nb);
       }
       for (Eigen::MatrixXd& buffer : ch.ubar) {
         if (buffer.rows() < width || buffer.cols() < Eigen::Index(m) * cap) {
@@ -516,6 +512,18 @@ class Mlp {
 
  private:
 
+  // Whether hidden layer l's g' is read off its output instead of stored: ReLU's
+  // g' = [g > 0], on a forward pass without the Jacobian chain (which needs the
+  // stored g'). Half the memory traffic of a training tape.
+  bool DerivativeFromOutput(const MlpWorkspace::Chunk& ch, int l) const {
+    return !ch.has_jacobian && arch_.activations[l].kind == ActivationKind::kRelu;
+  }
+
+  // ReLU's g'(a_l) = [h_{l+1} > 0] for the chunk's first nb samples (an expression).
+  static auto ReluDerivative(const MlpWorkspace::Chunk& ch, int l, int nb) {
+    return (ch.h[l + 1].leftCols(nb).array() > 0.0).template cast<double>();
+  }
+
   void CheckInput(Eigen::Index n) const {
     DIFFDYN_CHECK(n == num_inputs(), "MLP expects ", num_inputs(), " inputs, got ", n);
   }
@@ -539,12 +547,9 @@ class Mlp {
         auto a = ch->h[l + 1].leftCols(nb);
         a.colwise() = b(l);
         Gemm(1.0, W(l), false, ch->h[l].leftCols(nb), false, 1.0, a);
-        // ReLU's g' = [g > 0] is read off h_{l+1} in the backward pass: not stored
-        // unless the Jacobian chain needs it (half the memory traffic of a tape).
-        const bool store_dg = jac || arch_.activations[l].kind != ActivationKind::kRelu;
         ApplyActivation(arch_.activations[l], a.data(), a.size(), a.data(),
-                        store_dg ? ch->dg[l].data() : nullptr, jac ? ch->ddg[l].data() : nullptr);
-        ch->dg_stored[l] = store_dg;
+                        DerivativeFromOutput(*ch, l) ? nullptr : ch->dg[l].data(),
+                        jac ? ch->ddg[l].data() : nullptr);
       } else {
         y.colwise() = b(l);
         Gemm(1.0, W(l), false, ch->h[l].leftCols(nb), false, 1.0, y);
@@ -669,10 +674,10 @@ class Mlp {
       const int nxt = 1 - cur;
       auto next_abar = abar(nxt, cols);
       Gemm(1.0, W(l), true, abar(cur, rows), false, 0.0, next_abar);
-      if (ch->dg_stored[l - 1]) {
+      if (DerivativeFromOutput(*ch, l - 1)) {
+        next_abar.array() *= ReluDerivative(*ch, l - 1, nb);
+      } else {
         next_abar.array() *= ch->dg[l - 1].leftCols(nb).array();
-      } else {  // ReLU: g' = [h_l > 0], the same products as with a stored g'
-        next_abar.array() *= (ch->h[l].leftCols(nb).array() > 0.0).template cast<double>();
       }
       if (gjac) {
         auto zbar = ch->zbar.topLeftCorner(cols, nz);
