@@ -247,6 +247,36 @@ TEST(Mlp, ReverseModeValueLossMatchesJetsAndFiniteDifferences) { CheckReverseMod
 
 TEST(Mlp, ReverseModeJacobianLossMatchesJetsAndFiniteDifferences) { CheckReverseMode(true); }
 
+// Wide hidden layers (both sides above 16) take the plain transposed product in the
+// reverse sweep, thin ones a transposed copy of W: both against Jets.
+TEST(Mlp, ReverseModeWithWideAndThinLayersMatchesJets) {
+  Rng rng(23);
+  for (const Activation& act : {Activation::Relu(), Activation::Softplus(), Activation::Tanh()}) {
+    MlpArchitecture arch{{3, 20, 18, 2}, {act, act}};
+    const Mlp<double> net(arch, RandomVector(arch.num_parameters(), 0.4, rng));
+    const int batch = 7;
+    const Eigen::MatrixXd X = RandomMatrix(3, batch, 1.0, rng);
+    const Eigen::MatrixXd gy = RandomMatrix(2, batch, 1.0, rng);
+    for (bool jacobian_loss : {false, true}) {
+      const Eigen::MatrixXd gj = jacobian_loss ? RandomMatrix(2, 3 * batch, 1.0, rng)
+                                               : Eigen::MatrixXd::Zero(2, 3 * batch);
+      MlpWorkspace ws(arch, batch, 4);
+      Eigen::MatrixXd Y, J, gx;
+      Eigen::VectorXd grad;
+      net.Forward(X, &Y, jacobian_loss ? &J : nullptr, &ws);
+      net.Backward(gy, jacobian_loss ? gj : Eigen::MatrixXd(), &grad, &gx, &ws);
+      Eigen::VectorXd jet_grad(net.num_parameters());
+      for (Eigen::Index s = 0; s < net.num_parameters(); s += kJetSize) {
+        JetLossAndGradientBlock(net, X, gy, gj, s, &jet_grad);
+      }
+      const double scale = jet_grad.cwiseAbs().maxCoeff();
+      EXPECT_GT(scale, 1e-3);
+      EXPECT_LT((grad - jet_grad).cwiseAbs().maxCoeff(), 1e-10 * scale)
+          << ActivationName(act.kind) << (jacobian_loss ? " with Jacobian loss" : "");
+    }
+  }
+}
+
 TEST(Mlp, InputGradientMatchesJetsWithoutJacobianLoss) {
   using Jet3 = ceres::Jet<double, 3>;
   Rng rng(31);
