@@ -179,6 +179,7 @@ int main(int argc, char** argv) {
   int epochs = 100, compare_epochs = 200, threads = 0;
   std::uint64_t seed = 1;
   std::vector<std::uint64_t> seeds{1, 2, 3};
+  std::vector<std::string> single_solvers{"rk4", "dopri5"};
   bool quick = false, plot = false;
   app.add_option("--data", data, "pushing CSV")->capture_default_str();
   app.add_option("--out", out, "output folder for the CSVs and PNGs (existing rows are kept)")
@@ -194,6 +195,9 @@ int main(int argc, char** argv) {
   app.add_option("--seeds", seeds, "seeds of the acceptance runs and the four-model comparison")
       ->delimiter(',')
       ->capture_default_str();
+  app.add_option("--single-solvers", single_solvers, "solvers of the single-step grids (rk4, dopri5)")
+      ->delimiter(',')
+      ->capture_default_str();
   app.add_option("--threads", threads, "configurations trained at once (0: all cores)")->capture_default_str();
   app.add_flag("--quick", quick, "tiny run for the tests: 40 trajectories, 2 epochs, 2 x 2 grids, seed 1");
   app.add_flag("--plot", plot, "draw the PNGs with plot.py (Debian python3-matplotlib)");
@@ -206,6 +210,12 @@ int main(int argc, char** argv) {
     }
     DIFFDYN_CHECK(epochs >= 1 && compare_epochs >= 1, "--epochs and --compare-epochs must be >= 1");
     DIFFDYN_CHECK(!seeds.empty(), "--seeds: need at least one seed");
+    std::vector<Method> single_methods;
+    for (const std::string& name : single_solvers) {
+      DIFFDYN_CHECK(name == "rk4" || name == "dopri5", "--single-solvers: unknown solver '", name,
+                    "' (expected rk4 or dopri5)");
+      single_methods.push_back(name == "rk4" ? Method::kRk4 : Method::kDopri5);
+    }
     auto trajectories = ReadPushingData(data);
     std::vector<int> steps_single{2, 6, 10}, hidden_single{4, 32, 100};
     std::vector<int> steps_multi{2, 4, 6, 8, 10}, hidden_multi{4, 16, 32, 64, 100};
@@ -262,7 +272,7 @@ int main(int argc, char** argv) {
       }
     }
     if (has("single")) {
-      for (Method method : {Method::kRk4, Method::kDopri5}) {
+      for (Method method : single_methods) {
         for (PushingModelType type : {PushingModelType::kAbsNode, PushingModelType::kResNode}) {
           for (int steps : steps_single) {
             for (int hidden : hidden_single) add("single", type, method, steps, hidden, epochs, default_lr(type), seed);
