@@ -193,6 +193,27 @@ double DoubleLoss(const Mlp<double>& net, const Eigen::MatrixXd& X, const Eigen:
   return loss;
 }
 
+// Backward's parameter and input gradients (chunks of 4 samples) of the loss of
+// JetLossAndGradientBlock, and the parameter gradient from Jets in blocks of 8.
+struct ReverseAndJets {
+  Eigen::VectorXd reverse, jets;
+  Eigen::MatrixXd input;
+};
+ReverseAndJets ReverseAndJetGradients(const Mlp<double>& net, const Eigen::MatrixXd& X,
+                                      const Eigen::MatrixXd& gy, const Eigen::MatrixXd& gj,
+                                      bool jacobian_loss) {
+  ReverseAndJets g;
+  MlpWorkspace ws(net.architecture(), static_cast<int>(X.cols()), 4);
+  Eigen::MatrixXd Y, J;
+  net.Forward(X, &Y, jacobian_loss ? &J : nullptr, &ws);
+  net.Backward(gy, jacobian_loss ? gj : Eigen::MatrixXd(), &g.reverse, &g.input, &ws);
+  g.jets.resize(net.num_parameters());
+  for (Eigen::Index s = 0; s < net.num_parameters(); s += kJetSize) {
+    JetLossAndGradientBlock(net, X, gy, gj, s, &g.jets);
+  }
+  return g;
+}
+
 void CheckReverseMode(bool jacobian_loss) {
   Rng rng(jacobian_loss ? 21 : 20);
   for (const Activation& act : AllActivations()) {
@@ -202,17 +223,11 @@ void CheckReverseMode(bool jacobian_loss) {
     const Eigen::MatrixXd gy = RandomMatrix(2, batch, 1.0, rng);
     const Eigen::MatrixXd gj =
         jacobian_loss ? RandomMatrix(2, 3 * batch, 1.0, rng) : Eigen::MatrixXd::Zero(2, 3 * batch);
-    MlpWorkspace ws(net.architecture(), batch, 4);
-    Eigen::MatrixXd Y, J, gx;
-    Eigen::VectorXd grad;
-    net.Forward(X, &Y, jacobian_loss ? &J : nullptr, &ws);
-    net.Backward(gy, jacobian_loss ? gj : Eigen::MatrixXd(), &grad, &gx, &ws);
-
-    // Mode 2: Jets on the parameters, blocks of 8.
-    Eigen::VectorXd jet_grad(net.num_parameters());
-    for (Eigen::Index s = 0; s < net.num_parameters(); s += kJetSize) {
-      JetLossAndGradientBlock(net, X, gy, gj, s, &jet_grad);
-    }
+    // Mode 2: Jets on the parameters.
+    const ReverseAndJets g = ReverseAndJetGradients(net, X, gy, gj, jacobian_loss);
+    const Eigen::VectorXd& grad = g.reverse;
+    const Eigen::VectorXd& jet_grad = g.jets;
+    const Eigen::MatrixXd& gx = g.input;
     const double scale = jet_grad.cwiseAbs().maxCoeff();
     EXPECT_GT(scale, 1e-3);
     EXPECT_LT((grad - jet_grad).cwiseAbs().maxCoeff(), 1e-8 * scale) << ActivationName(act.kind);
@@ -260,18 +275,10 @@ TEST(Mlp, ReverseModeWithWideAndThinLayersMatchesJets) {
     for (bool jacobian_loss : {false, true}) {
       const Eigen::MatrixXd gj = jacobian_loss ? RandomMatrix(2, 3 * batch, 1.0, rng)
                                                : Eigen::MatrixXd::Zero(2, 3 * batch);
-      MlpWorkspace ws(arch, batch, 4);
-      Eigen::MatrixXd Y, J, gx;
-      Eigen::VectorXd grad;
-      net.Forward(X, &Y, jacobian_loss ? &J : nullptr, &ws);
-      net.Backward(gy, jacobian_loss ? gj : Eigen::MatrixXd(), &grad, &gx, &ws);
-      Eigen::VectorXd jet_grad(net.num_parameters());
-      for (Eigen::Index s = 0; s < net.num_parameters(); s += kJetSize) {
-        JetLossAndGradientBlock(net, X, gy, gj, s, &jet_grad);
-      }
-      const double scale = jet_grad.cwiseAbs().maxCoeff();
+      const ReverseAndJets g = ReverseAndJetGradients(net, X, gy, gj, jacobian_loss);
+      const double scale = g.jets.cwiseAbs().maxCoeff();
       EXPECT_GT(scale, 1e-3);
-      EXPECT_LT((grad - jet_grad).cwiseAbs().maxCoeff(), 1e-10 * scale)
+      EXPECT_LT((g.reverse - g.jets).cwiseAbs().maxCoeff(), 1e-10 * scale)
           << ActivationName(act.kind) << (jacobian_loss ? " with Jacobian loss" : "");
     }
   }
