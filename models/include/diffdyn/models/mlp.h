@@ -680,23 +680,23 @@ class Mlp {
       const int rows = arch_.sizes[l + 1];
       const int cols = arch_.sizes[l];
       const int nxt = 1 - cur;
-      // Cotangents of layer l-1 first: abar' = (W^T abar) .* g'. With ReLU the
-      // mask streams h_l (the layer's input, written long ago on a solver's tape)
-      // into the cache, so the weight-gradient product below reads it hot: its
-      // transposed packing of a cold h_l runs at half speed.
-      if (l > 0) {
-        auto next_abar = abar(nxt, cols);
-        GemmTransposedWeight(l, abar(cur, rows), next_abar, buf);
-        if (DerivativeFromOutput(*ch, l - 1)) {
-          MultiplyByReluDerivative(next_abar, ch->h[l].leftCols(nb));
-        } else {
-          next_abar.array() *= ch->dg[l - 1].leftCols(nb).array();
+      // Cotangents of layer l-1: abar' = (W^T abar) .* g' (for l = 0 the input gradient).
+      auto input_cotangent = [&] {
+        if (l > 0) {
+          auto next_abar = abar(nxt, cols);
+          GemmTransposedWeight(l, abar(cur, rows), next_abar, buf);
+          if (DerivativeFromOutput(*ch, l - 1)) {
+            MultiplyByReluDerivative(next_abar, ch->h[l].leftCols(nb));
+          } else {
+            next_abar.array() *= ch->dg[l - 1].leftCols(nb).array();
+          }
+        } else if (grad_inputs) {
+          GemmTransposedWeight(0, abar(cur, rows), grad_inputs->middleCols(begin, nb), buf);
         }
-      } else if (grad_inputs) {
-        GemmTransposedWeight(0, abar(cur, rows), grad_inputs->middleCols(begin, nb), buf);
-      }
+      };
       // Parameter gradients of layer l: dW += abar h_l^T, db += abar 1.
-      if (want_params) {
+      auto parameter_gradient = [&] {
+        if (!want_params) return;
         Eigen::Map<Eigen::MatrixXd> gw(grad_out + arch_.WeightOffset(l), rows, cols);
         Eigen::Map<Eigen::VectorXd> gb(grad_out + arch_.BiasOffset(l), rows);
         if (!accumulate) {
@@ -712,6 +712,17 @@ class Mlp {
             Gemm(1.0, ubar(cur, rows), false, ch->z[l].topLeftCorner(cols, nz), true, 1.0, gw);
           }
         }
+      };
+      // Whichever pass reads h_l first brings it into the cache for the other. A ReLU
+      // mask reads h_l as one contiguous stream, so it goes first: the weight-gradient
+      // product's transposed packing of h_l runs at half speed when h_l is cold (as on
+      // a solver's tape, written long before). Otherwise the product goes first.
+      if (l > 0 && DerivativeFromOutput(*ch, l - 1)) {
+        input_cotangent();
+        parameter_gradient();
+      } else {
+        parameter_gradient();
+        input_cotangent();
       }
       if (l == 0) break;
       // Jacobian cotangents of layer l-1: zbar = W^T ubar, and their share of abar'.
