@@ -130,6 +130,10 @@ class MlpWorkspace {
   /// Samples per chunk (fixes the summation order, so the results).
   int chunk_size() const { return chunk_size_; }
 
+  /// A layer with a side of at most this many units is thin: the reverse sweep
+  /// multiplies by a transposed copy of its weights (see Mlp::GemmTransposedWeight).
+  static constexpr int kThinSide = 16;
+
   /// Makes room for `batch` samples of `arch` (allocates only when growing).
   void Reserve(const MlpArchitecture& arch, int batch, bool jacobian) {
     if (!(arch == arch_)) {
@@ -156,7 +160,7 @@ class MlpWorkspace {
     std::vector<Eigen::MatrixXd> u;    // U_l, n_{l+1} x n_0 cap (Jacobian mode)
     std::vector<Eigen::MatrixXd> z;    // Z_l, n_l x n_0 cap, l >= 1 (Jacobian mode)
     Eigen::MatrixXd abar[2], dbar, ubar[2], zbar;
-    Eigen::MatrixXd weight_t;          // W_l^T of a thin layer (reverse sweep)
+    Eigen::VectorXd weight_t;          // W_l^T of a thin layer, kThinSide x width (reverse sweep)
     Eigen::VectorXd grad;
     int count = 0;                 // samples in this chunk after the last Forward
     bool has_jacobian = false;     // whether the last Forward built the chain
@@ -173,7 +177,7 @@ class MlpWorkspace {
       for (int l = 0; l < layers; ++l) h[l].resize(arch.sizes[l], cap);
       for (int l = 0; l + 1 < layers; ++l) dg[l].resize(arch.sizes[l + 1], cap);
       abar[0].resize(width, cap);
-      weight_t.resize(width, width);
+      weight_t.resize(Eigen::Index(kThinSide) * width);
       abar[1].resize(width, cap);
       grad.resize(arch.num_parameters());
       if (jacobian) {
@@ -462,8 +466,11 @@ class Mlp {
       MlpWorkspace::Chunk& ch = ws->chunks_[c];
       const int nb = end - begin;
       const int width = arch_.max_width();
+      // The chain below reads g' stored; ReLU's comes off its output: 1 .* [h > 0].
       for (int l = 0; l + 1 < L; ++l) {
-        if (DerivativeFromOutput(ch, l)) ch.dg[l].leftCols(nb) = ReluDerivative(ch, l, nb);
+        if (!DerivativeFromOutput(ch, l)) continue;
+        ch.dg[l].leftCols(nb).setOnes();
+        MultiplyByReluDerivative(ch.dg[l].leftCols(nb), ch.h[l + 1].leftCols(nb));
       }
       for (Eigen::MatrixXd& buffer : ch.ubar) {
         if (buffer.rows() < width || buffer.cols() < Eigen::Index(m) * cap) {
@@ -519,11 +526,6 @@ class Mlp {
   // stored g'). Half the memory traffic of a training tape.
   bool DerivativeFromOutput(const MlpWorkspace::Chunk& ch, int l) const {
     return !ch.has_jacobian && arch_.activations[l].kind == ActivationKind::kRelu;
-  }
-
-  // ReLU's g'(a_l) = [h_{l+1} > 0] for the chunk's first nb samples (an expression).
-  static auto ReluDerivative(const MlpWorkspace::Chunk& ch, int l, int nb) {
-    return (ch.h[l + 1].leftCols(nb).array() > 0.0).template cast<double>();
   }
 
   // abar .*= [h > 0] column by column (abar and h rows x nb): ReLU's g' applied from
@@ -589,20 +591,19 @@ class Mlp {
     }
   }
 
-  // out = W_l^T abar. A thin W_l (a side of at most 16) is transposed into the
-  // chunk's buffer first: BLAS runs the plain product of the copy up to 2.5x faster
-  // than the transposed one for these shapes (6 x 100 times 6 x 250).
+  // out = W_l^T abar. A thin W_l (a side of at most kThinSide) is transposed into
+  // the chunk's buffer first: BLAS runs the plain product of the copy up to 2.5x
+  // faster than the transposed one for these shapes (6 x 100 times 6 x 250).
   template <typename ABlock, typename OutBlock>
   void GemmTransposedWeight(int l, const ABlock& abar, OutBlock&& out,
                             MlpWorkspace::Chunk* buf) const {
-    constexpr int kThin = 16;
     const int rows = arch_.sizes[l + 1];
     const int cols = arch_.sizes[l];
-    if (std::min(rows, cols) > kThin) {
+    if (std::min(rows, cols) > MlpWorkspace::kThinSide) {
       Gemm(1.0, W(l), true, abar, false, 0.0, out);
       return;
     }
-    auto wt = buf->weight_t.topLeftCorner(cols, rows);
+    Eigen::Map<Eigen::MatrixXd> wt(buf->weight_t.data(), cols, rows);
     wt = W(l).transpose();
     Gemm(1.0, wt, false, abar, false, 0.0, out);
   }
@@ -680,12 +681,14 @@ class Mlp {
       const int rows = arch_.sizes[l + 1];
       const int cols = arch_.sizes[l];
       const int nxt = 1 - cur;
+      // Whether layer l-1's g' is ReLU's, read off h_l.
+      const bool relu_mask = l > 0 && DerivativeFromOutput(*ch, l - 1);
       // Cotangents of layer l-1: abar' = (W^T abar) .* g' (for l = 0 the input gradient).
       auto input_cotangent = [&] {
         if (l > 0) {
           auto next_abar = abar(nxt, cols);
           GemmTransposedWeight(l, abar(cur, rows), next_abar, buf);
-          if (DerivativeFromOutput(*ch, l - 1)) {
+          if (relu_mask) {
             MultiplyByReluDerivative(next_abar, ch->h[l].leftCols(nb));
           } else {
             next_abar.array() *= ch->dg[l - 1].leftCols(nb).array();
@@ -717,7 +720,7 @@ class Mlp {
       // mask reads h_l as one contiguous stream, so it goes first: the weight-gradient
       // product's transposed packing of h_l runs at half speed when h_l is cold (as on
       // a solver's tape, written long before). Otherwise the product goes first.
-      if (l > 0 && DerivativeFromOutput(*ch, l - 1)) {
+      if (relu_mask) {
         input_cotangent();
         parameter_gradient();
       } else {
