@@ -3,6 +3,7 @@
 //   diffdyn push --model MODEL.json --trials 20 --obstacle --seed 1 --samples 1000
 //                --horizon 20 --max-steps 20 [--collision-margin M] [--collision-substeps S]
 //                [--clearance C --clearance-weight W] [--fallback-margin F]
+//                [--reach-weight W]
 //                [--threads 0] [--out DIR] [--json]
 //
 // --model is a pushing model file or `oracle` (the ODE world itself as the model).
@@ -104,6 +105,7 @@ struct PushArgs {
   double fallback_margin = PushTaskOptions{}.fallback_margin;
   double clearance = PushTaskOptions{}.clearance;
   double clearance_weight = PushTaskOptions{}.clearance_weight;
+  double reach_weight = PushTaskOptions{}.reach_weight;
 };
 
 void RunPush(const PushArgs& args) {
@@ -118,6 +120,7 @@ void RunPush(const PushArgs& args) {
   options.fallback_margin = args.fallback_margin;
   options.clearance = args.clearance;
   options.clearance_weight = args.clearance_weight;
+  options.reach_weight = args.reach_weight;
   options.world.obstacle = args.obstacle;
   DIFFDYN_CHECK(args.trials >= 1, "--trials: must be >= 1, got ", args.trials);
   ValidatePushTaskOptions(options);
@@ -168,6 +171,7 @@ void RunPush(const PushArgs& args) {
                {"fallbacks", fallbacks},
                {"clearance", args.clearance},
                {"clearance_weight", args.clearance_weight},
+               {"reach_weight", args.reach_weight},
                {"seed", args.common.seed},
                {"outcomes", counts},
                {"top_view", top_view}});
@@ -225,6 +229,10 @@ void RegisterPushCommand(CLI::App& app) {
       ->capture_default_str();
   command->add_option("--clearance-weight", args->clearance_weight,
                       "Cost: weight w of the clearance term w (1 - d / clearance)^2")
+      ->capture_default_str();
+  command->add_option("--reach-weight", args->reach_weight,
+                      "Cost: added once per planned push whose tool path leaves the arm's reach "
+                      "(0: off)")
       ->capture_default_str();
   command->add_option("--out", args->out, "Directory for trials.csv and top_view.png (optional)");
   command->callback([args] { RunPush(*args); });

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include <Eigen/Geometry>
@@ -418,6 +419,44 @@ PushingEnv::~PushingEnv() = default;
 
 const PushingConfig& PushingEnv::config() const { return world_->config; }
 
+PushPath PushingEnv::PlanarPath(const Eigen::Vector3d& pose, const Eigen::Vector3d& action) {
+  const double c = std::cos(pose.z()), s = std::sin(pose.z());
+  const Eigen::Vector2d p(pose.x(), pose.y()), ex(c, s), ey(-s, c);
+  PushPath path;
+  path.approach_start = p - kStartBehind * ex + kLateralScale * action[0] * ey;
+  path.push_start = path.approach_start + kApproach * ex;
+  const double a = pose.z() + action[1];
+  path.push_end = path.push_start + kPushScale * action[2] * Eigen::Vector2d(std::cos(a), std::sin(a));
+  return path;
+}
+
+PushReach PushingEnv::Reach(const PushingConfig& config) {
+  const PandaIk ik(World::MakeIkOptions(config));
+  const Vec7 home = World::Home();
+  auto reaches = [&](double r, double azimuth) {
+    const Vec3 target(r * std::cos(azimuth), r * std::sin(azimuth), config.push_height);
+    return ik.Solve(target, Vec3(0, 0, -1), home).position_error <= config.ik_tolerance;
+  };
+  // Bisection between a radius that fails and one that succeeds.
+  auto boundary = [&](double fail, double ok, double azimuth) {
+    while (std::abs(fail - ok) > 1e-4) {
+      const double mid = 0.5 * (fail + ok);
+      (reaches(mid, azimuth) ? ok : fail) = mid;
+    }
+    return ok;
+  };
+  PushReach reach{0.0, std::numeric_limits<double>::infinity()};
+  for (double azimuth = -0.75; azimuth <= 0.75 + 1e-9; azimuth += 0.25) {
+    // The middle of the workspace, then out to a radius no Panda reaches, and in to the base.
+    const double middle = 0.5;
+    DIFFDYN_CHECK(reaches(middle, azimuth), "pushing reach: the IK misses the point at radius ",
+                  middle, " m, azimuth ", azimuth, " rad");
+    reach.outer = std::min(reach.outer, boundary(1.5, middle, azimuth));
+    reach.inner = std::max(reach.inner, reaches(0.0, azimuth) ? 0.0 : boundary(0.0, middle, azimuth));
+  }
+  return reach;
+}
+
 bool PushingEnv::OnTable(double x, double y) {
   return std::abs(x - kTableCenterX) <= kTableSizeX / 2 && std::abs(y) <= kTableSizeY / 2;
 }
@@ -494,13 +533,12 @@ PushResult PushingEnv::Step(const Eigen::Vector3d& action) {
 
   // Cartesian segments of the approach and the push at push height.
   const double theta = pose.z();
-  const Vec3 bx(std::cos(theta), std::sin(theta), 0), by(-std::sin(theta), std::cos(theta), 0);
+  const PushPath path = PlanarPath(pose, action);
   Segment approach, push;
-  approach.start = Vec3(pose.x(), pose.y(), c.push_height) - kStartBehind * bx +
-                   kLateralScale * action[0] * by;
-  approach.direction = bx;
+  approach.start = Vec3(path.approach_start.x(), path.approach_start.y(), c.push_height);
+  approach.direction = Vec3(std::cos(theta), std::sin(theta), 0);
   approach.length = kApproach;
-  push.start = approach.PointAt(kApproach);
+  push.start = Vec3(path.push_start.x(), path.push_start.y(), c.push_height);
   push.direction = Vec3(std::cos(theta + action[1]), std::sin(theta + action[1]), 0);
   push.length = kPushScale * action[2];
 

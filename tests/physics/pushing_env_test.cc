@@ -85,6 +85,51 @@ TEST(PushingEnv, PushMovesBlockAlongPushAndTipFollowsThePath) {
   EXPECT_EQ(env.joint_path().size(), path.size());
 }
 
+TEST(PushingEnv, PlanarPathIsTheExecutedToolPath) {
+  PushingConfig config;
+  config.obstacle = false;
+  PushingEnv env(config);
+  const Eigen::Vector3d pose(0.55, -0.1, 0.7), action(0.6, -0.9, 0.8);
+  env.Reset(pose);
+  const PushPath plan = PushingEnv::PlanarPath(pose, action);
+  // By hand: a = p - 0.1 e_x + 0.0475 u0 e_y, b = a + 0.035 e_x, c = b + 0.08 at 0.7 - 0.9.
+  const Eigen::Vector2d ex(std::cos(0.7), std::sin(0.7)), ey(-std::sin(0.7), std::cos(0.7));
+  const Eigen::Vector2d a = pose.head<2>() - 0.1 * ex + 0.0475 * 0.6 * ey;
+  EXPECT_LT((plan.approach_start - a).norm(), 1e-15);
+  EXPECT_LT((plan.push_start - (a + 0.035 * ex)).norm(), 1e-15);
+  EXPECT_LT((plan.push_end - plan.push_start - 0.08 * Eigen::Vector2d(std::cos(-0.2), std::sin(-0.2)))
+                .norm(), 1e-15);
+  const PushResult r = env.Step(action);
+  ASSERT_EQ(r.status, PushStatus::kOk);
+  EXPECT_LT((env.tip_path().front().head<2>() - plan.approach_start).norm(), 2e-3);
+  EXPECT_LT((env.tip_path().back().head<2>() - plan.push_end).norm(), 2e-3);
+}
+
+TEST(PushingEnv, ReachAnnulusSeparatesExecutableFromUnreachablePushes) {
+  PushingConfig config;
+  config.obstacle = false;
+  const PushReach reach = PushingEnv::Reach(config);
+  // A Panda's tool point at table height: roughly 0.25-0.3 m to 0.8 m from the base.
+  EXPECT_GT(reach.inner, 0.2);
+  EXPECT_LT(reach.inner, 0.35);
+  EXPECT_GT(reach.outer, 0.7);
+  EXPECT_LT(reach.outer, 0.9);
+  // Zero-length pushes straight away from the base along azimuth phi: the tool moves
+  // out from r - 0.1 to r - 0.065 (the approach). Ending 1.5 cm inside the outer
+  // radius Step executes it; starting 1 cm outside it reports it unreachable.
+  PushingEnv env(config);
+  for (double phi : {-0.5, 0.0, 0.4}) {
+    for (double offset : {-0.05, 0.01}) {
+      const double r = reach.outer + offset + 0.1;  // the tool starts at reach.outer + offset
+      const Eigen::Vector3d pose(r * std::cos(phi), r * std::sin(phi), phi);
+      if (!PushingEnv::OnTable(pose.x(), pose.y())) continue;
+      env.Reset(pose);
+      const PushStatus status = env.Step({0.0, 0.0, 0.0}).status;
+      EXPECT_EQ(status == PushStatus::kUnreachable, offset > 0) << "phi " << phi << " offset " << offset;
+    }
+  }
+}
+
 TEST(PushingEnv, InvalidActionsAreRejectedByName) {
   PushingEnv env;
   auto message = [&](const Eigen::Vector3d& u) -> std::string {

@@ -88,6 +88,21 @@ struct PushResult {
   bool block_hit_obstacle = false;     ///< the block touched the obstacle while pushed
 };
 
+/// The tool point's path of one push in the table plane (steps 2-5 of the file
+/// comment), for a block at pose p = (x, y, theta) and action u:
+///   approach_start a = p - 0.1 e_x + 0.0475 u0 e_y,   e_x = (cos theta, sin theta),
+///   push_start     b = a + 0.035 e_x,                 e_y = (-sin theta, cos theta),
+///   push_end       c = b + 0.1 u2 (cos(theta + u1), sin(theta + u1)).
+struct PushPath {
+  Eigen::Vector2d approach_start, push_start, push_end;
+};
+
+/// The annulus around the arm's base (the world origin) where the IK reaches the
+/// tool point at push height with the tool pointing down: inner <= |(x, y)| <= outer (m).
+struct PushReach {
+  double inner = 0, outer = 0;
+};
+
 /// The ODE-engine pushing world; one per thread (see the file comment).
 class PushingEnv {
  public:
@@ -126,6 +141,16 @@ class PushingEnv {
 
   /// True when (x, y) lies on the table top (the block's centre is supported).
   static bool OnTable(double x, double y);
+
+  /// The planar tool path of `action` from block pose `pose` (PushPath); no checks.
+  static PushPath PlanarPath(const Eigen::Vector3d& pose, const Eigen::Vector3d& action);
+
+  /// The reach annulus of `config`'s arm and tool: for azimuths -0.75..0.75 rad (the
+  /// table in front of the arm), bisection to 0.1 mm on the radius where a single IK
+  /// solve from the home posture meets config.ik_tolerance; the largest inner and the
+  /// smallest outer radius. A push whose path leaves the annulus is (nearly always)
+  /// one Step reports as unreachable; Step itself plans with the IK, not with this.
+  static PushReach Reach(const PushingConfig& config = {});
 
   /// Penetration depth (m) of the block at `pose` into the obstacle, 0 if apart.
   static double ObstaclePenetration(const Eigen::Vector3d& pose, double block_size = 0.1);

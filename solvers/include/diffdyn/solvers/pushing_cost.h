@@ -28,12 +28,20 @@
 //                away from the obstacle that still ranks samples once all of them are
 //                within the margin (where the flat w_c term no longer does).
 //
-// With m = 0, S = 0 and no clearance both forms equal the seed's cost exactly.
+//   reach        (annulus inner..outer, weight w_r) adds w_r once per step whose push
+//                cannot be executed by the arm: the tool path of action u_t from pose
+//                x_t (PushingEnv::PlanarPath: approach start a, push start b, push
+//                end c) leaves the annulus inner <= |p| <= outer around the arm's
+//                base (PushingEnv::Reach). The pose form cannot see it (no action).
+//
+// With m = 0, S = 0 and no clearance or reach term both forms equal the seed's cost
+// exactly.
 //
 //   diffdyn::PushingCost cost({0.8, -0.1, 0.0}, /*obstacle=*/true);
 //   cost.set_collision_margin(0.01);    // optional
 //   cost.set_collision_substeps(4);     // optional
 //   cost.set_clearance(0.05, 1.0);      // optional
+//   cost.set_reach(diffdyn::PushingEnv::Reach(), 100.0);  // optional
 //   diffdyn::Mppi mppi(model, cost, options, seed);
 #pragma once
 
@@ -46,6 +54,7 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/physics/pushing_env.h"
 #include "diffdyn/solvers/mppi.h"
 
 namespace diffdyn {
@@ -149,6 +158,40 @@ class PushingCost : public MppiCost {
   double clearance() const { return clearance_; }
   double clearance_weight() const { return clearance_weight_; }
 
+  /// Reach term of the file comment: w_r (>= 0; 0 turns it off) for every step whose
+  /// push path leaves the annulus `reach` (0 <= inner < outer).
+  void set_reach(const PushReach& reach, double weight) {
+    DIFFDYN_CHECK(std::isfinite(reach.inner) && std::isfinite(reach.outer) && reach.inner >= 0 &&
+                      reach.inner < reach.outer,
+                  "reach annulus must satisfy 0 <= inner < outer, got ", reach.inner, " and ",
+                  reach.outer);
+    DIFFDYN_CHECK(weight >= 0 && std::isfinite(weight), "reach weight must be finite and >= 0, got ",
+                  weight);
+    reach_ = reach;
+    reach_weight_ = weight;
+  }
+  const PushReach& reach() const { return reach_; }
+  double reach_weight() const { return reach_weight_; }
+
+  /// True when the push `action` from `pose` leaves the reach annulus: a corner of
+  /// its path beyond `outer`, or a segment of it closer than `inner` to the base.
+  bool Unreachable(const Eigen::Ref<const Eigen::Vector3d>& pose,
+                   const Eigen::Ref<const Eigen::Vector3d>& action) const {
+    const PushPath p = PushingEnv::PlanarPath(pose, action);
+    const double outer2 = reach_.outer * reach_.outer;
+    for (const Eigen::Vector2d* q : {&p.approach_start, &p.push_start, &p.push_end}) {
+      if (q->squaredNorm() > outer2) return true;
+    }
+    // Distance from the base (origin) to the segment (a, b).
+    auto near_base = [this](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+      const Eigen::Vector2d e = b - a;
+      const double l2 = e.squaredNorm();
+      const double f = l2 > 0 ? std::clamp(-a.dot(e) / l2, 0.0, 1.0) : 0.0;
+      return (a + f * e).squaredNorm() < reach_.inner * reach_.inner;
+    };
+    return near_base(p.approach_start, p.push_start) || near_base(p.push_start, p.push_end);
+  }
+
   /// The clearance term at one pose (0 when off or farther than c).
   double ClearanceTerm(double x, double y, double theta) const {
     if (clearance_ <= 0 || clearance_weight_ <= 0) return 0.0;
@@ -184,22 +227,36 @@ class PushingCost : public MppiCost {
   }
 
   /// costs(b) += (x'_b - g)^T Q (x'_b - g) + w_c swept_collision(x_b -> x'_b) (+ the
-  /// largest clearance term over the swept poses), with
-  /// x = prev_states(:, b), x' = states(:, b) (3 x B each) and the swept test of
-  /// the file comment; equals Accumulate(states, costs) when substeps = 0.
+  /// largest clearance term over the swept poses) (+ w_r when the push u_b from x_b
+  /// is unreachable), with x = prev_states(:, b), u = actions(:, b),
+  /// x' = states(:, b) (3 x B each) and the swept test of the file comment; equals
+  /// Accumulate(states, costs) when substeps = 0 and the reach term is off.
   void AccumulateStep(const Eigen::Ref<const Eigen::MatrixXd>& prev_states,
+                      const Eigen::Ref<const Eigen::MatrixXd>& actions,
                       const Eigen::Ref<const Eigen::MatrixXd>& states,
                       Eigen::Ref<Eigen::VectorXd> costs) const override {
-    if (substeps_ == 0) {
+    if (substeps_ == 0 || !obstacle_) {
       Accumulate(states, costs);
-      return;
+    } else {
+      AccumulateSwept(prev_states, states, costs);
     }
+    if (reach_weight_ > 0) {
+      for (Eigen::Index b = 0; b < states.cols(); ++b) {
+        if (Unreachable(prev_states.col(b), actions.col(b))) costs[b] += reach_weight_;
+      }
+    }
+  }
+
+ private:
+  // The goal, swept-collision and clearance terms of AccumulateStep (obstacle on).
+  void AccumulateSwept(const Eigen::Ref<const Eigen::MatrixXd>& prev_states,
+                       const Eigen::Ref<const Eigen::MatrixXd>& states,
+                       Eigen::Ref<Eigen::VectorXd> costs) const {
     const bool clearance = clearance_ > 0 && clearance_weight_ > 0;
     const int poses = substeps_ + 1;
     for (Eigen::Index b = 0; b < states.cols(); ++b) {
       const double x1 = states(0, b), y1 = states(1, b), t1 = states(2, b);
       costs[b] += GoalTerm(x1, y1, t1);
-      if (!obstacle_) continue;
       const double x0 = prev_states(0, b), y0 = prev_states(1, b), t0 = prev_states(2, b);
       const double dx = x1 - x0, dy = y1 - y0;
       const double dt = std::remainder(t1 - t0, 2 * std::numbers::pi);
@@ -219,7 +276,6 @@ class PushingCost : public MppiCost {
     }
   }
 
- private:
   double GoalTerm(double x, double y, double theta) const {
     const double dx = x - goal_.x(), dy = y - goal_.y(), dt = theta - goal_.z();
     return dx * dx + dy * dy + 0.1 * dt * dt;
@@ -245,6 +301,8 @@ class PushingCost : public MppiCost {
   int substeps_ = 0;
   double clearance_ = 0;
   double clearance_weight_ = 0;
+  PushReach reach_{0.0, std::numeric_limits<double>::infinity()};
+  double reach_weight_ = 0;
 };
 
 }  // namespace diffdyn
