@@ -3,7 +3,7 @@
 //   diffdyn push --model MODEL.json --trials 20 --obstacle --seed 1 --samples 1000
 //                --horizon 20 --max-steps 20 [--collision-margin M] [--collision-substeps S]
 //                [--clearance C --clearance-weight W] [--fallback-margin F]
-//                [--reach-weight W]
+//                [--reach-weight W] [--reach-steps H]
 //                [--threads 0] [--out DIR] [--json]
 //
 // --model is a pushing model file or `oracle` (the ODE world itself as the model).
@@ -106,6 +106,7 @@ struct PushArgs {
   double clearance = PushTaskOptions{}.clearance;
   double clearance_weight = PushTaskOptions{}.clearance_weight;
   double reach_weight = PushTaskOptions{}.reach_weight;
+  int reach_steps = PushTaskOptions{}.reach_steps;
 };
 
 void RunPush(const PushArgs& args) {
@@ -121,6 +122,7 @@ void RunPush(const PushArgs& args) {
   options.clearance = args.clearance;
   options.clearance_weight = args.clearance_weight;
   options.reach_weight = args.reach_weight;
+  options.reach_steps = args.reach_steps;
   options.world.obstacle = args.obstacle;
   DIFFDYN_CHECK(args.trials >= 1, "--trials: must be >= 1, got ", args.trials);
   ValidatePushTaskOptions(options);
@@ -172,6 +174,7 @@ void RunPush(const PushArgs& args) {
                {"clearance", args.clearance},
                {"clearance_weight", args.clearance_weight},
                {"reach_weight", args.reach_weight},
+               {"reach_steps", args.reach_steps},
                {"seed", args.common.seed},
                {"outcomes", counts},
                {"top_view", top_view}});
@@ -233,6 +236,10 @@ void RegisterPushCommand(CLI::App& app) {
   command->add_option("--reach-weight", args->reach_weight,
                       "Cost: added once per planned push whose tool path leaves the arm's reach "
                       "(0: off)")
+      ->capture_default_str();
+  command->add_option("--reach-steps", args->reach_steps,
+                      "Cost: the reach term checks the first this many planned pushes "
+                      "(1: only the push executed now)")
       ->capture_default_str();
   command->add_option("--out", args->out, "Directory for trials.csv and top_view.png (optional)");
   command->callback([args] { RunPush(*args); });

@@ -153,7 +153,7 @@ void Mppi::RolloutChunk(int chunk, int begin, int end, const Eigen::VectorXd& x)
     }
     // The step and its running cost.
     model_.PredictBatch(s.states, s.actions, s.next, *s.workspace);
-    cost_.AccumulateStep(s.states, s.actions, s.next, costs);
+    cost_.AccumulateStep(t, s.states, s.actions, s.next, costs);
     s.states.swap(s.next);
   }
 }
@@ -207,7 +207,7 @@ Eigen::VectorXd Mppi::Command(const Eigen::Ref<const Eigen::VectorXd>& x_in) {
       check_actions_.col(0) = nominal_.col(t);
       check_actions_.col(1) = best_sequence_.col(t);
       model_.PredictBatch(check_states_, check_actions_, check_next_, *check_workspace_);
-      cost_.AccumulateStep(check_states_, check_actions_, check_next_, check_costs_);
+      cost_.AccumulateStep(t, check_states_, check_actions_, check_next_, check_costs_);
       check_states_.swap(check_next_);
     }
     if (!(check_costs_[0] <= check_costs_[1] + options_.fallback_margin)) {

@@ -53,6 +53,7 @@ void ValidatePushTaskOptions(const PushTaskOptions& o) {
                 "--clearance-weight: must be >= 0, got ", o.clearance_weight);
   DIFFDYN_CHECK(std::isfinite(o.reach_weight) && o.reach_weight >= 0,
                 "--reach-weight: must be >= 0, got ", o.reach_weight);
+  DIFFDYN_CHECK(o.reach_steps >= 1, "--reach-steps: must be >= 1, got ", o.reach_steps);
   DIFFDYN_CHECK(o.fallback_margin >= 0, "--fallback-margin: must be >= 0 (inf: off), got ",
                 o.fallback_margin);
   DIFFDYN_CHECK(o.collision_substeps >= 0, "--collision-substeps: must be >= 0, got ",
@@ -102,7 +103,9 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
   cost.set_collision_margin(options.collision_margin);
   cost.set_collision_substeps(options.collision_substeps);
   cost.set_clearance(options.clearance, options.clearance_weight);
-  if (options.reach_weight > 0) cost.set_reach(PushingEnv::Reach(world), options.reach_weight);
+  if (options.reach_weight > 0) {
+    cost.set_reach(PushingEnv::Reach(world), options.reach_weight, options.reach_steps);
+  }
   MppiOptions mo;
   mo.samples = options.samples;
   mo.horizon = options.horizon;

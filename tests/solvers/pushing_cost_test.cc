@@ -26,7 +26,7 @@ double PoseCost(const PushingCost& cost, const Eigen::Vector3d& x) {
 }
 double StepCost(const PushingCost& cost, const Eigen::Vector3d& x0, const Eigen::Vector3d& x1) {
   Eigen::VectorXd c = Eigen::VectorXd::Zero(1);
-  cost.AccumulateStep(x0, Eigen::Vector3d::Zero(), x1, c);
+  cost.AccumulateStep(0, x0, Eigen::Vector3d::Zero(), x1, c);
   return c[0];
 }
 double GoalTerm(const Eigen::Vector3d& x) {
@@ -141,7 +141,7 @@ TEST(PushingCostSafety, MarginZeroWithoutSweepIsTheSeedsCostExactly) {
   PushingCost cost(kGoal, true);
   Eigen::VectorXd pose_costs = Eigen::VectorXd::Zero(n), step_costs = Eigen::VectorXd::Zero(n);
   cost.Accumulate(states, pose_costs);
-  cost.AccumulateStep(prev, Eigen::MatrixXd::Zero(3, n), states, step_costs);
+  cost.AccumulateStep(0, prev, Eigen::MatrixXd::Zero(3, n), states, step_costs);
   int collisions = 0;
   for (int b = 0; b < n; ++b) {
     const Eigen::Vector3d x = states.col(b);
@@ -175,14 +175,16 @@ class RecordingCost : public MppiCost {
                   Eigen::Ref<Eigen::VectorXd>) const override {
     ADD_FAILURE() << "Mppi should call the step form";
   }
-  void AccumulateStep(const Eigen::Ref<const Eigen::MatrixXd>& prev,
+  void AccumulateStep(int t, const Eigen::Ref<const Eigen::MatrixXd>& prev,
                       const Eigen::Ref<const Eigen::MatrixXd>& actions,
                       const Eigen::Ref<const Eigen::MatrixXd>& states,
                       Eigen::Ref<Eigen::VectorXd>) const override {
+    steps.push_back(t);
     prevs.push_back(prev);
     acts.push_back(actions);
     nexts.push_back(states);
   }
+  mutable std::vector<int> steps;
   mutable std::vector<Eigen::MatrixXd> prevs, acts, nexts;
 };
 
@@ -220,6 +222,7 @@ TEST(MppiStepCost, StepFormSeesTheStateBeforeEachStep) {
   const Eigen::Vector3d x(0.3, -0.2, 0.1);
   mppi.Command(x);
   ASSERT_EQ(cost.prevs.size(), 6u);
+  EXPECT_EQ(cost.steps, (std::vector<int>{0, 1, 2, 3, 4, 5}));
   EXPECT_EQ(cost.prevs[0], x.replicate(1, 64));
   for (int t = 1; t < 6; ++t) EXPECT_EQ(cost.prevs[t], cost.nexts[t - 1]) << "step " << t;
   // Each step moved by exactly 0.1 u (the drift model) with the clamped |u_i| <= 1.
@@ -235,7 +238,7 @@ TEST(MppiStepCost, StepFormSeesTheStateBeforeEachStep) {
 TEST(PushingCostReach, ChargesEachPlannedPushTheArmCannotExecute) {
   PushingCost cost(kGoal, true);
   const PushReach reach{0.27, 0.8};
-  cost.set_reach(reach, 50.0);
+  cost.set_reach(reach, 50.0, 1);
   // A block at 0.8 m pushed straight out by 0.05 m moves the tool 0.7 -> 0.735 ->
   // 0.785 m (inside); at 0.95 m the tool starts at 0.85 m (outside).
   const Eigen::Vector3d inside_pose(0.8, 0.0, 0.0), far_pose(0.95, 0.0, 0.0);
@@ -246,17 +249,24 @@ TEST(PushingCostReach, ChargesEachPlannedPushTheArmCannotExecute) {
                                 Eigen::Vector3d(0.0, kPi / 2, 1.0)));
   // Towards the base: (0.35, 0.05) -> (0.215, 0.05) ends 0.22 m from it (inside the inner radius).
   EXPECT_TRUE(cost.Unreachable(Eigen::Vector3d(0.25, 0.05, kPi), Eigen::Vector3d(0.0, 0.0, 1.0)));
-  // The step form adds the weight once for the push from x_t, and not at all when off.
-  const Eigen::Vector3d x1(0.9, 0.0, 0.0);
-  Eigen::VectorXd c = Eigen::VectorXd::Zero(1);
-  cost.AccumulateStep(far_pose, Eigen::Vector3d(0.0, 0.0, 0.0), x1, c);
-  EXPECT_DOUBLE_EQ(c[0], GoalTerm(x1) + 50.0);
-  cost.set_reach(reach, 0.0);
-  c.setZero();
-  cost.AccumulateStep(far_pose, Eigen::Vector3d(0.0, 0.0, 0.0), x1, c);
-  EXPECT_DOUBLE_EQ(c[0], GoalTerm(x1));
-  EXPECT_THROW(cost.set_reach({0.5, 0.4}, 1.0), Error);
-  EXPECT_THROW(cost.set_reach(reach, -1.0), Error);
+  // The step form adds the weight for the push from x_t at steps t < H_r only, and
+  // not at all when off.
+  const Eigen::Vector3d x1(0.9, 0.0, 0.0), stay(0.0, 0.0, 0.0);
+  auto step_cost = [&](int t) {
+    Eigen::VectorXd c = Eigen::VectorXd::Zero(1);
+    cost.AccumulateStep(t, far_pose, stay, x1, c);
+    return c[0];
+  };
+  EXPECT_DOUBLE_EQ(step_cost(0), GoalTerm(x1) + 50.0);
+  EXPECT_DOUBLE_EQ(step_cost(1), GoalTerm(x1));
+  cost.set_reach(reach, 50.0, 3);
+  EXPECT_DOUBLE_EQ(step_cost(2), GoalTerm(x1) + 50.0);
+  EXPECT_DOUBLE_EQ(step_cost(3), GoalTerm(x1));
+  cost.set_reach(reach, 0.0, 3);
+  EXPECT_DOUBLE_EQ(step_cost(0), GoalTerm(x1));
+  EXPECT_THROW(cost.set_reach({0.5, 0.4}, 1.0, 1), Error);
+  EXPECT_THROW(cost.set_reach(reach, -1.0, 1), Error);
+  EXPECT_THROW(cost.set_reach(reach, 1.0, 0), Error);
 }
 
 }  // namespace

@@ -11,8 +11,8 @@
 //   3. S_k = sum_{t=1..T} c(x_{k,t-1} -> x_{k,t}) + sum_t u_t^T lambda Sigma^-1 eps_{k,t}
 //      (running cost over the predicted transitions, no terminal cost, plus the
 //       perturbation cost; most costs only look at the new state, c(x_{k,t}),
-//       MppiCost::AccumulateStep can also look at the state before the step and
-//       at the action taken)
+//       MppiCost::AccumulateStep can also look at the step index t, the state
+//       before the step and the action taken)
 //   4. w_k = exp(-(S_k - min_j S_j) / lambda) / sum_j exp(-(S_j - min S) / lambda)
 //   5. u_t <- u_t + sum_k w_k eps_{k,t};  execute u_0.
 //   6. (optional, off by default: MppiOptions::fallback_margin) the averaged
@@ -58,15 +58,17 @@ class MppiCost {
   /// costs(b) += c(states(:, b)) for every column b; states: n x B, costs: B.
   virtual void Accumulate(const Eigen::Ref<const Eigen::MatrixXd>& states,
                           Eigen::Ref<Eigen::VectorXd> costs) const = 0;
-  /// The transition form: costs(b) += c(x_t, u_t -> x_{t+1}) with x_t =
-  /// prev_states(:, b) (n x B), u_t = actions(:, b) (m x B, after clamping) and
-  /// x_{t+1} = states(:, b) (n x B). Mppi calls this one; the default ignores x_t
-  /// and u_t and calls Accumulate(states, costs), so a cost without a step form
-  /// gives the running cost sum_t c(x_{t+1}) of the file comment.
-  virtual void AccumulateStep(const Eigen::Ref<const Eigen::MatrixXd>& prev_states,
+  /// The transition form: costs(b) += c_t(x_t, u_t -> x_{t+1}) for step t of the
+  /// horizon (0 = the push executed now), with x_t = prev_states(:, b) (n x B),
+  /// u_t = actions(:, b) (m x B, after clamping) and x_{t+1} = states(:, b) (n x B).
+  /// Mppi calls this one; the default ignores t, x_t and u_t and calls
+  /// Accumulate(states, costs), so a cost without a step form gives the running
+  /// cost sum_t c(x_{t+1}) of the file comment.
+  virtual void AccumulateStep(int t, const Eigen::Ref<const Eigen::MatrixXd>& prev_states,
                               const Eigen::Ref<const Eigen::MatrixXd>& actions,
                               const Eigen::Ref<const Eigen::MatrixXd>& states,
                               Eigen::Ref<Eigen::VectorXd> costs) const {
+    (void)t;
     (void)prev_states;
     (void)actions;
     Accumulate(states, costs);

@@ -28,11 +28,13 @@
 //                away from the obstacle that still ranks samples once all of them are
 //                within the margin (where the flat w_c term no longer does).
 //
-//   reach        (annulus inner..outer, weight w_r) adds w_r once per step whose push
-//                cannot be executed by the arm: the tool path of action u_t from pose
-//                x_t (PushingEnv::PlanarPath: approach start a, push start b, push
-//                end c) leaves the annulus inner <= |p| <= outer around the arm's
-//                base (PushingEnv::Reach). The pose form cannot see it (no action).
+//   reach        (annulus inner..outer, weight w_r, steps H_r) adds w_r for each of
+//                the first H_r steps t < H_r whose push the arm cannot execute: the
+//                tool path of action u_t from pose x_t (PushingEnv::PlanarPath:
+//                approach start a, push start b, push end c) leaves the annulus
+//                inner <= |p| <= outer around the arm's base (PushingEnv::Reach).
+//                H_r = 1 checks only the push executed now, from the measured pose;
+//                later steps start from predicted poses. The pose form cannot see it.
 //
 // With m = 0, S = 0 and no clearance or reach term both forms equal the seed's cost
 // exactly.
@@ -41,7 +43,7 @@
 //   cost.set_collision_margin(0.01);    // optional
 //   cost.set_collision_substeps(4);     // optional
 //   cost.set_clearance(0.05, 1.0);      // optional
-//   cost.set_reach(diffdyn::PushingEnv::Reach(), 100.0);  // optional
+//   cost.set_reach(diffdyn::PushingEnv::Reach(), 100.0, 1);  // optional
 //   diffdyn::Mppi mppi(model, cost, options, seed);
 #pragma once
 
@@ -158,9 +160,11 @@ class PushingCost : public MppiCost {
   double clearance() const { return clearance_; }
   double clearance_weight() const { return clearance_weight_; }
 
-  /// Reach term of the file comment: w_r (>= 0; 0 turns it off) for every step whose
-  /// push path leaves the annulus `reach` (0 <= inner < outer).
-  void set_reach(const PushReach& reach, double weight) {
+  /// Reach term of the file comment: w_r (>= 0; 0 turns it off) for each of the
+  /// first `steps` (H_r >= 1) steps whose push path leaves the annulus `reach`
+  /// (0 <= inner < outer).
+  void set_reach(const PushReach& reach, double weight, int steps) {
+    DIFFDYN_CHECK(steps >= 1, "reach steps must be >= 1, got ", steps);
     DIFFDYN_CHECK(std::isfinite(reach.inner) && std::isfinite(reach.outer) && reach.inner >= 0 &&
                       reach.inner < reach.outer,
                   "reach annulus must satisfy 0 <= inner < outer, got ", reach.inner, " and ",
@@ -169,9 +173,11 @@ class PushingCost : public MppiCost {
                   weight);
     reach_ = reach;
     reach_weight_ = weight;
+    reach_steps_ = steps;
   }
   const PushReach& reach() const { return reach_; }
   double reach_weight() const { return reach_weight_; }
+  int reach_steps() const { return reach_steps_; }
 
   /// True when the push `action` from `pose` leaves the reach annulus: a corner of
   /// its path beyond `outer`, or a segment of it closer than `inner` to the base.
@@ -227,11 +233,11 @@ class PushingCost : public MppiCost {
   }
 
   /// costs(b) += (x'_b - g)^T Q (x'_b - g) + w_c swept_collision(x_b -> x'_b) (+ the
-  /// largest clearance term over the swept poses) (+ w_r when the push u_b from x_b
-  /// is unreachable), with x = prev_states(:, b), u = actions(:, b),
+  /// largest clearance term over the swept poses) (+ w_r when t < H_r and the push
+  /// u_b from x_b is unreachable), with x = prev_states(:, b), u = actions(:, b),
   /// x' = states(:, b) (3 x B each) and the swept test of the file comment; equals
   /// Accumulate(states, costs) when substeps = 0 and the reach term is off.
-  void AccumulateStep(const Eigen::Ref<const Eigen::MatrixXd>& prev_states,
+  void AccumulateStep(int t, const Eigen::Ref<const Eigen::MatrixXd>& prev_states,
                       const Eigen::Ref<const Eigen::MatrixXd>& actions,
                       const Eigen::Ref<const Eigen::MatrixXd>& states,
                       Eigen::Ref<Eigen::VectorXd> costs) const override {
@@ -240,7 +246,7 @@ class PushingCost : public MppiCost {
     } else {
       AccumulateSwept(prev_states, states, costs);
     }
-    if (reach_weight_ > 0) {
+    if (reach_weight_ > 0 && t < reach_steps_) {
       for (Eigen::Index b = 0; b < states.cols(); ++b) {
         if (Unreachable(prev_states.col(b), actions.col(b))) costs[b] += reach_weight_;
       }
@@ -303,6 +309,7 @@ class PushingCost : public MppiCost {
   double clearance_weight_ = 0;
   PushReach reach_{0.0, std::numeric_limits<double>::infinity()};
   double reach_weight_ = 0;
+  int reach_steps_ = 1;
 };
 
 }  // namespace diffdyn

@@ -77,9 +77,11 @@ struct PushTaskOptions {
   /// PushingCost clearance term (distance c in m, weight w_l); c = 0 or w_l = 0: off.
   double clearance = 0.0;
   double clearance_weight = 0.0;
-  /// PushingCost reach term weight w_r (0: off) with the annulus
-  /// PushingEnv::Reach(world): MPPI pays w_r for each planned push the arm cannot execute.
+  /// PushingCost reach term: weight w_r (0: off) over the first `reach_steps` planned
+  /// pushes, annulus PushingEnv::Reach(world): MPPI pays w_r for each of those pushes
+  /// that the arm cannot execute.
   double reach_weight = 0.0;
+  int reach_steps = 1;
 };
 
 /// One trial's record.
