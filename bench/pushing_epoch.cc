@@ -49,6 +49,7 @@ constexpr double kFlopsPerEval = 2.0 * (6 * 100 + 100 * 100 + 100 * 6);
 
 void RunEpochs(benchmark::State& state, Method method) {
   const int threads = static_cast<int>(state.range(0));
+  const int chunk_size = static_cast<int>(state.range(1));
   PushingModelConfig config;
   config.type = PushingModelType::kAbsNode;
   config.method = method;
@@ -60,6 +61,7 @@ void RunEpochs(benchmark::State& state, Method method) {
   options.batch_size = 500;
   options.val_fraction = 0.0;
   options.threads = threads;
+  options.chunk_size = chunk_size;
   options.progress = false;
   Trainer trainer(&model, options);
   trainer.Train(Data());  // warm-up: buffers sized
@@ -77,8 +79,11 @@ void RunEpochs(benchmark::State& state, Method method) {
 
 void BM_EpochAbsNodeRk4(benchmark::State& state) { RunEpochs(state, Method::kRk4); }
 BENCHMARK(BM_EpochAbsNodeRk4)
-    ->Arg(1)
-    ->Arg(2)
+    ->ArgNames({"threads", "chunk"})
+    ->Args({1, 250})
+    ->Args({2, 250})
+    ->Args({2, 125})
+    ->Args({2, 100})
     ->MeasureProcessCPUTime()
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond)
@@ -86,7 +91,8 @@ BENCHMARK(BM_EpochAbsNodeRk4)
 
 void BM_EpochAbsNodeDopri5(benchmark::State& state) { RunEpochs(state, Method::kDopri5); }
 BENCHMARK(BM_EpochAbsNodeDopri5)
-    ->Arg(2)
+    ->ArgNames({"threads", "chunk"})
+    ->Args({2, 250})
     ->MeasureProcessCPUTime()
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond)

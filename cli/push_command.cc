@@ -107,6 +107,7 @@ struct PushArgs {
   double clearance_weight = PushTaskOptions{}.clearance_weight;
   double reach_weight = PushTaskOptions{}.reach_weight;
   int reach_steps = PushTaskOptions{}.reach_steps;
+  bool reach_limited = PushTaskOptions{}.reach_limited;
 };
 
 void RunPush(const PushArgs& args) {
@@ -123,6 +124,7 @@ void RunPush(const PushArgs& args) {
   options.clearance_weight = args.clearance_weight;
   options.reach_weight = args.reach_weight;
   options.reach_steps = args.reach_steps;
+  options.reach_limited = args.reach_limited;
   options.world.obstacle = args.obstacle;
   DIFFDYN_CHECK(args.trials >= 1, "--trials: must be >= 1, got ", args.trials);
   ValidatePushTaskOptions(options);
@@ -175,6 +177,7 @@ void RunPush(const PushArgs& args) {
                {"clearance_weight", args.clearance_weight},
                {"reach_weight", args.reach_weight},
                {"reach_steps", args.reach_steps},
+               {"reach_limited", args.reach_limited},
                {"seed", args.common.seed},
                {"outcomes", counts},
                {"top_view", top_view}});
@@ -240,6 +243,9 @@ void RegisterPushCommand(CLI::App& app) {
   command->add_option("--reach-steps", args->reach_steps,
                       "Cost: the reach term checks the first this many planned pushes "
                       "(1: only the push executed now)")
+      ->capture_default_str();
+  command->add_option("--reach-limited", args->reach_limited,
+                      "MPPI: predict that a push the arm cannot reach leaves the block in place")
       ->capture_default_str();
   command->add_option("--out", args->out, "Directory for trials.csv and top_view.png (optional)");
   command->callback([args] { RunPush(*args); });

@@ -4,11 +4,13 @@
 #include <chrono>
 #include <cmath>
 #include <numbers>
+#include <optional>
 #include <tuple>
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/physics/pushing_collect.h"
+#include "diffdyn/physics/reach_limited_model.h"
 #include "diffdyn/solvers/mppi.h"
 #include "diffdyn/solvers/pushing_cost.h"
 
@@ -103,9 +105,9 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
   cost.set_collision_margin(options.collision_margin);
   cost.set_collision_substeps(options.collision_substeps);
   cost.set_clearance(options.clearance, options.clearance_weight);
-  if (options.reach_weight > 0) {
-    cost.set_reach(PushingEnv::Reach(world), options.reach_weight, options.reach_steps);
-  }
+  const bool reach_used = options.reach_weight > 0 || options.reach_limited;
+  const PushReach reach = reach_used ? PushingEnv::Reach(world) : PushReach{};
+  if (options.reach_weight > 0) cost.set_reach(reach, options.reach_weight, options.reach_steps);
   MppiOptions mo;
   mo.samples = options.samples;
   mo.horizon = options.horizon;
@@ -115,7 +117,10 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
   mo.u_max = Eigen::Vector3d(1.0, kPi / 2, 1.0);
   mo.threads = options.threads;
   mo.fallback_margin = options.fallback_margin;
-  Mppi mppi(model, cost, mo, mppi_seed);
+  // MPPI rolls out the model, or the model that leaves unreachable pushes unexecuted.
+  std::optional<ReachLimitedModel> limited;
+  if (options.reach_limited) limited.emplace(model, reach);
+  Mppi mppi(limited ? static_cast<const TransitionModel&>(*limited) : model, cost, mo, mppi_seed);
   // One-sample batch for the model's prediction of each executed push.
   auto predict_ws = model.MakeWorkspace(1);
   Eigen::MatrixXd predict_next(3, 1);

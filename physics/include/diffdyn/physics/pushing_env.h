@@ -30,6 +30,7 @@
 //   env.tip_path();                                // executed tip path (x, y, z)
 #pragma once
 
+#include <algorithm>
 #include <memory>
 #include <string>
 #include <vector>
@@ -101,6 +102,25 @@ struct PushPath {
 /// tool point at push height with the tool pointing down: inner <= |(x, y)| <= outer (m).
 struct PushReach {
   double inner = 0, outer = 0;
+
+  /// True when `path` stays in the annulus: no corner beyond `outer` and no segment
+  /// (approach or push) closer than `inner` to the base.
+  bool Contains(const PushPath& path) const {
+    const double outer2 = outer * outer;
+    for (const Eigen::Vector2d* q : {&path.approach_start, &path.push_start, &path.push_end}) {
+      if (q->squaredNorm() > outer2) return false;
+    }
+    // Squared distance from the base (origin) to the segment (a, b).
+    auto distance2 = [](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+      const Eigen::Vector2d e = b - a;
+      const double l2 = e.squaredNorm();
+      const double f = l2 > 0 ? std::clamp(-a.dot(e) / l2, 0.0, 1.0) : 0.0;
+      return (a + f * e).squaredNorm();
+    };
+    const double inner2 = inner * inner;
+    return distance2(path.approach_start, path.push_start) >= inner2 &&
+           distance2(path.push_start, path.push_end) >= inner2;
+  }
 };
 
 /// The ODE-engine pushing world; one per thread (see the file comment).

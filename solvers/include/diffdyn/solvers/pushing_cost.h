@@ -179,23 +179,10 @@ class PushingCost : public MppiCost {
   double reach_weight() const { return reach_weight_; }
   int reach_steps() const { return reach_steps_; }
 
-  /// True when the push `action` from `pose` leaves the reach annulus: a corner of
-  /// its path beyond `outer`, or a segment of it closer than `inner` to the base.
+  /// True when the push `action` from `pose` leaves the reach annulus (PushReach::Contains).
   bool Unreachable(const Eigen::Ref<const Eigen::Vector3d>& pose,
                    const Eigen::Ref<const Eigen::Vector3d>& action) const {
-    const PushPath p = PushingEnv::PlanarPath(pose, action);
-    const double outer2 = reach_.outer * reach_.outer;
-    for (const Eigen::Vector2d* q : {&p.approach_start, &p.push_start, &p.push_end}) {
-      if (q->squaredNorm() > outer2) return true;
-    }
-    // Distance from the base (origin) to the segment (a, b).
-    auto near_base = [this](const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-      const Eigen::Vector2d e = b - a;
-      const double l2 = e.squaredNorm();
-      const double f = l2 > 0 ? std::clamp(-a.dot(e) / l2, 0.0, 1.0) : 0.0;
-      return (a + f * e).squaredNorm() < reach_.inner * reach_.inner;
-    };
-    return near_base(p.approach_start, p.push_start) || near_base(p.push_start, p.push_end);
+    return !reach_.Contains(PushingEnv::PlanarPath(pose, action));
   }
 
   /// The clearance term at one pose (0 when off or farther than c).

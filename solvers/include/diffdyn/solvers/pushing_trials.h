@@ -82,6 +82,9 @@ struct PushTaskOptions {
   /// that the arm cannot execute.
   double reach_weight = 0.0;
   int reach_steps = 1;
+  /// MPPI rolls out ReachLimitedModel(model, PushingEnv::Reach(world)): a planned push
+  /// the arm cannot execute leaves the block where it is.
+  bool reach_limited = false;
 };
 
 /// One trial's record.
