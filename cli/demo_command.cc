@@ -16,6 +16,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -346,6 +347,23 @@ void RunDemo(const DemoOptions& options) {
                "block ever touching the obstacle.\n\n",
                options.samples, options.horizon, task.collision_margin,
                task.collision_substeps + 1, options.max_steps);
+    if (task.reach_limited || task.reach_weight > 0) {
+      const PushReach reach = PushingEnv::Reach(task.world);
+      fmt::print(s,
+                 "MPPI knows the arm's reach: the tool path of a push must stay {:.3f}-{:.3f} m "
+                 "from the base (PushingEnv::Reach).{}{}\n\n",
+                 reach.inner, reach.outer,
+                 task.reach_limited ? " In the rollouts a push beyond it leaves the block in place."
+                                    : "",
+                 task.reach_weight > 0
+                     ? fmt::format(" {} {:g} more if beyond it.",
+                                   task.reach_steps == 1
+                                       ? std::string("The push executed now costs")
+                                       : fmt::format("Each of the first {} planned pushes costs",
+                                                     task.reach_steps),
+                                   task.reach_weight)
+                     : "");
+    }
     fmt::print(s,
                "**Success: {} of {} trials = {:.0f} % (95 % Wilson interval {:.0f}-{:.0f} %)**, "
                "mean pushes {:.2f}; outcomes: {}.\n\n",

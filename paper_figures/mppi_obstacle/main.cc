@@ -60,6 +60,8 @@ struct FigureOptions {
   int oracle_horizon = 10;  // T = 5 plans too few pushes ahead to go around the obstacle
   double collision_margin = PushTaskOptions{}.collision_margin;
   int collision_substeps = PushTaskOptions{}.collision_substeps;
+  double reach_weight = PushTaskOptions{}.reach_weight;
+  bool reach_limited = PushTaskOptions{}.reach_limited;
 };
 
 struct Row {
@@ -166,6 +168,8 @@ Row RunTrials(const std::string& name, const TransitionModel& model, int trials,
   task.threads = o.threads;
   task.collision_margin = o.collision_margin;
   task.collision_substeps = o.collision_substeps;
+  task.reach_weight = o.reach_weight;
+  task.reach_limited = o.reach_limited;
   ProgressBar bar("trials " + name, trials, !o.quiet);
   Row row{name, samples, horizon, RunPushTrials(model, trials, task, o.seed, &bar)};
   bar.Finish();
@@ -271,6 +275,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--collision-substeps", o.collision_substeps,
                  "cost: poses tested inside each predicted push (0: end pose only, the seed's)")
+      ->capture_default_str();
+  app.add_option("--reach-weight", o.reach_weight,
+                 "cost: added when the push executed now is beyond the arm's reach (0: off)")
+      ->capture_default_str();
+  app.add_option("--reach-limited", o.reach_limited,
+                 "MPPI: predict that a push the arm cannot reach leaves the block in place")
       ->capture_default_str();
   app.add_flag("--reuse", o.reuse, "reuse data.csv and models/<model>.json found in --out");
   app.add_flag("--quick", o.quick,
