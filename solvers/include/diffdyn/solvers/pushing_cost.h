@@ -71,18 +71,22 @@ struct Rectangle {
 /// True when the rectangles overlap with positive area (separating-axis test on
 /// the four edge normals; touching edges count as apart).
 inline bool RectanglesOverlap(const Rectangle& r1, const Rectangle& r2) {
+  // Each rectangle's unit axes (one sincos per rectangle).
   const Rectangle* rects[2] = {&r1, &r2};
+  Eigen::Vector2d axes[2][2];
+  for (int i = 0; i < 2; ++i) {
+    const double c = std::cos(rects[i]->angle), s = std::sin(rects[i]->angle);
+    axes[i][0] = Eigen::Vector2d(c, s);
+    axes[i][1] = Eigen::Vector2d(-s, c);
+  }
   const Eigen::Vector2d d = r2.center - r1.center;
-  for (const Rectangle* r : rects) {
-    const double c = std::cos(r->angle), s = std::sin(r->angle);
-    const std::array<Eigen::Vector2d, 2> axes = {Eigen::Vector2d(c, s), Eigen::Vector2d(-s, c)};
-    for (const auto& axis : axes) {
+  for (int i = 0; i < 2; ++i) {
+    for (const Eigen::Vector2d& axis : axes[i]) {
       // Projected radius of each rectangle on `axis`, and the distance of centres.
       double radius = 0;
-      for (const Rectangle* q : rects) {
-        const double cq = std::cos(q->angle), sq = std::sin(q->angle);
-        radius += q->half_size.x() * std::abs(axis.dot(Eigen::Vector2d(cq, sq))) +
-                  q->half_size.y() * std::abs(axis.dot(Eigen::Vector2d(-sq, cq)));
+      for (int j = 0; j < 2; ++j) {
+        radius += rects[j]->half_size.x() * std::abs(axis.dot(axes[j][0])) +
+                  rects[j]->half_size.y() * std::abs(axis.dot(axes[j][1]));
       }
       if (std::abs(axis.dot(d)) >= radius) return false;
     }
