@@ -1,6 +1,7 @@
 // One training epoch of the absolute NeuralODE (6-100-100-6 ReLU, rk4 3/8 rule on 10
 // grid points = 9 steps, double) on 1000 transitions of the shared PyBullet data in
-// batches of 500 with Adam, on 1 and 2 threads; the same with dopri5 (tolerance 1e-8)
+// batches of 500 with Adam, on 1 and 2 threads and for several chunk sizes (samples
+// per thread task, TrainOptions::chunk_size); the same with dopri5 (tolerance 1e-8)
 // for the dopri5 / rk4 ratio; and the machine's peak: the best two-thread
 // double-precision matrix product at 2048^3 (Eigen, columns split over two threads).
 // The PyTorch reference of the same epoch is bench/pushing_epoch_torch.py.
