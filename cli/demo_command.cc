@@ -16,7 +16,6 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
-#include <string>
 #include <thread>
 #include <vector>
 
@@ -351,18 +350,16 @@ void RunDemo(const DemoOptions& options) {
       const PushReach reach = PushingEnv::Reach(task.world);
       fmt::print(s,
                  "MPPI knows the arm's reach: the tool path of a push must stay {:.3f}-{:.3f} m "
-                 "from the base (PushingEnv::Reach).{}{}\n\n",
-                 reach.inner, reach.outer,
-                 task.reach_limited ? " In the rollouts a push beyond it leaves the block in place."
-                                    : "",
-                 task.reach_weight > 0
-                     ? fmt::format(" {} {:g} more if beyond it.",
-                                   task.reach_steps == 1
-                                       ? std::string("The push executed now costs")
-                                       : fmt::format("Each of the first {} planned pushes costs",
-                                                     task.reach_steps),
-                                   task.reach_weight)
-                     : "");
+                 "from the base (PushingEnv::Reach).",
+                 reach.inner, reach.outer);
+      if (task.reach_limited) fmt::print(s, " In the rollouts a push beyond it leaves the block in place.");
+      if (task.reach_weight > 0 && task.reach_steps == 1) {
+        fmt::print(s, " The push executed now costs {:g} more if beyond it.", task.reach_weight);
+      } else if (task.reach_weight > 0) {
+        fmt::print(s, " Each of the first {} planned pushes costs {:g} more if beyond it.",
+                   task.reach_steps, task.reach_weight);
+      }
+      fmt::print(s, "\n\n");
     }
     fmt::print(s,
                "**Success: {} of {} trials = {:.0f} % (95 % Wilson interval {:.0f}-{:.0f} %)**, "

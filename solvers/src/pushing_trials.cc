@@ -72,12 +72,16 @@ void CheckModel(const TransitionModel& model) {
                 "; pushing needs 3 and 3");
 }
 
-}  // namespace
+// The reach annulus of the task's world when a reach term is on (IK bisections,
+// computed once per series).
+std::optional<PushReach> TaskReach(const PushTaskOptions& options) {
+  if (options.reach_weight <= 0 && !options.reach_limited) return std::nullopt;
+  return PushingEnv::Reach(options.world);
+}
 
-PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOptions& options,
-                       std::uint64_t seed) {
-  ValidatePushTaskOptions(options);
-  CheckModel(model);
+// RunPushTrial with the series' reach annulus (set when a reach term is on).
+PushTrial RunTrial(const TransitionModel& model, int index, const PushTaskOptions& options,
+                   std::uint64_t seed, const std::optional<PushReach>& reach) {
   DIFFDYN_CHECK(index >= 0, "trial index must be >= 0, got ", index);
   constexpr double kPi = std::numbers::pi;
 
@@ -105,9 +109,7 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
   cost.set_collision_margin(options.collision_margin);
   cost.set_collision_substeps(options.collision_substeps);
   cost.set_clearance(options.clearance, options.clearance_weight);
-  const bool reach_used = options.reach_weight > 0 || options.reach_limited;
-  const PushReach reach = reach_used ? PushingEnv::Reach(world) : PushReach{};
-  if (options.reach_weight > 0) cost.set_reach(reach, options.reach_weight, options.reach_steps);
+  if (options.reach_weight > 0) cost.set_reach(*reach, options.reach_weight, options.reach_steps);
   MppiOptions mo;
   mo.samples = options.samples;
   mo.horizon = options.horizon;
@@ -119,7 +121,7 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
   mo.fallback_margin = options.fallback_margin;
   // MPPI rolls out the model, or the model that leaves unreachable pushes unexecuted.
   std::optional<ReachLimitedModel> limited;
-  if (options.reach_limited) limited.emplace(model, reach);
+  if (options.reach_limited) limited.emplace(model, *reach);
   Mppi mppi(limited ? static_cast<const TransitionModel&>(*limited) : model, cost, mo, mppi_seed);
   // One-sample batch for the model's prediction of each executed push.
   auto predict_ws = model.MakeWorkspace(1);
@@ -165,18 +167,28 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
   return trial;
 }
 
+}  // namespace
+
+PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOptions& options,
+                       std::uint64_t seed) {
+  ValidatePushTaskOptions(options);
+  CheckModel(model);
+  return RunTrial(model, index, options, seed, TaskReach(options));
+}
+
 PushTrialsSummary RunPushTrials(const TransitionModel& model, int trials,
                                 const PushTaskOptions& options, std::uint64_t seed,
                                 ProgressBar* progress) {
   DIFFDYN_CHECK(trials >= 1, "--trials: must be >= 1, got ", trials);
   ValidatePushTaskOptions(options);
   CheckModel(model);
+  const std::optional<PushReach> reach = TaskReach(options);
   PushTrialsSummary summary;
   summary.trials = trials;
   std::vector<double> command_ms;
   long pushes = 0;
   for (int i = 0; i < trials; ++i) {
-    PushTrial trial = RunPushTrial(model, i, options, seed);
+    PushTrial trial = RunTrial(model, i, options, seed, reach);
     summary.successes += trial.success ? 1 : 0;
     pushes += trial.pushes;
     command_ms.insert(command_ms.end(), trial.command_ms.begin(), trial.command_ms.end());
