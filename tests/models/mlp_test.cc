@@ -3,6 +3,7 @@
 // differences, thread-count determinism.
 #include "diffdyn/models/mlp.h"
 
+#include <string>
 #include <vector>
 
 #include <ceres/jet.h>
@@ -155,6 +156,91 @@ TEST(Mlp, BatchedForwardMatchesSingleSample) {
     }
     EXPECT_LT((Y2 - Y).cwiseAbs().maxCoeff(), 1e-15);
   }
+}
+
+// Evaluate (values only; the fused layer kernel where built) against Forward's
+// BLAS products and the single-sample path: every activation, layer widths
+// that leave row tiles of 1-4 units, batches around the 32-sample block.
+TEST(Mlp, EvaluateMatchesForwardAndSingleSample) {
+  Rng rng(19);
+  const std::vector<std::vector<int>> shapes = {
+      {6, 100, 100, 6}, {3, 6, 5, 2}, {6, 7, 13, 3}, {1, 9, 1}, {4, 33, 4}};
+  for (const Activation& act : AllActivations()) {
+    for (const std::vector<int>& sizes : shapes) {
+      MlpArchitecture arch{sizes, std::vector<Activation>(sizes.size() - 2, act)};
+      const Mlp<double> net(arch, RandomVector(arch.num_parameters(), 0.4, rng));
+      for (int batch : {1, 31, 32, 33, 250}) {
+        const Eigen::MatrixXd X = RandomMatrix(sizes.front(), batch, 1.0, rng);
+        MlpWorkspace ws(arch, batch, 96, false);
+        Eigen::MatrixXd Y;
+        net.Forward(X, &Y, nullptr, &ws);
+        Eigen::MatrixXd E = Eigen::MatrixXd::Constant(sizes.back(), batch, 7.0);
+        net.Evaluate(X, E, &ws, 2);
+        const double scale = 1.0 + Y.cwiseAbs().maxCoeff();
+        EXPECT_LT((E - Y).cwiseAbs().maxCoeff(), 1e-13 * scale)
+            << ActivationName(act.kind) << " " << sizes.size() << " layers, batch " << batch;
+        const Eigen::VectorXd y0 = net(Eigen::VectorXd(X.col(batch - 1)));
+        EXPECT_LT((E.col(batch - 1) - y0).cwiseAbs().maxCoeff(), 1e-13 * scale);
+      }
+    }
+  }
+}
+
+// Evaluate writes into any column block (the MPPI rollouts pass slices) and, with
+// the layer kernel, gives each sample the same bits whatever the batch around it,
+// the chunk size and the thread count.
+TEST(Mlp, EvaluateIsIndependentOfBatchChunksAndThreads) {
+  Rng rng(23);
+  MlpArchitecture arch{{6, 100, 100, 6}, {Activation::Relu(), Activation::Relu()}};
+  const Mlp<double> net(arch, RandomVector(arch.num_parameters(), 0.2, rng));
+  const int batch = 333;
+  const Eigen::MatrixXd X = RandomMatrix(6, batch, 1.0, rng);
+  Eigen::MatrixXd reference(6, batch);
+  MlpWorkspace ws(arch, batch, 128, false);
+  net.Evaluate(X, reference, &ws, 1);
+  for (int threads : {2, 3}) {
+    Eigen::MatrixXd Y(6, batch);
+    net.Evaluate(X, Y, &ws, threads);
+    EXPECT_TRUE(Y == reference) << threads << " threads";
+  }
+  // Into the middle of a wider matrix, from a column block of another.
+  Eigen::MatrixXd wide = Eigen::MatrixXd::Zero(6, batch + 20);
+  Eigen::MatrixXd xwide = Eigen::MatrixXd::Zero(6, batch + 20);
+  xwide.middleCols(10, batch) = X;
+  net.Evaluate(xwide.middleCols(10, batch), wide.middleCols(10, batch), &ws, 2);
+  EXPECT_TRUE(wide.middleCols(10, batch) == reference);
+  EXPECT_TRUE(wide.leftCols(10).isZero() && wide.rightCols(10).isZero());
+  if (kHaveLayerKernel) {
+    MlpWorkspace other(arch, batch, 50, false);
+    Eigen::MatrixXd Y(6, batch);
+    net.Evaluate(X, Y, &other, 2);
+    EXPECT_TRUE(Y == reference) << "chunk 50";
+    Eigen::MatrixXd tail(6, 7);
+    net.Evaluate(X.rightCols(7), tail, &other);
+    EXPECT_TRUE(tail == reference.rightCols(7)) << "a batch of the last 7 samples";
+  }
+}
+
+TEST(Mlp, EvaluateKeepsNoTape) {
+  MlpArchitecture arch{{2, 3, 1}, {Activation::Relu()}};
+  Rng rng(3);
+  const Mlp<double> net(arch, RandomVector(arch.num_parameters(), 1.0, rng));
+  MlpWorkspace ws(arch, 4);
+  Eigen::MatrixXd Y;
+  net.Forward(Eigen::MatrixXd::Ones(2, 4), &Y, nullptr, &ws);
+  Eigen::MatrixXd E(1, 4);
+  net.Evaluate(Eigen::MatrixXd::Ones(2, 4), E, &ws);
+  Eigen::VectorXd grad;
+  try {
+    net.Backward(Eigen::MatrixXd::Ones(1, 4), Eigen::MatrixXd(), &grad, nullptr, &ws);
+    ADD_FAILURE() << "Backward after Evaluate did not throw";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("Evaluate, which keeps no tape"), std::string::npos)
+        << e.what();
+  }
+  Eigen::MatrixXd wrong(2, 4);
+  EXPECT_THROW(net.Evaluate(Eigen::MatrixXd::Ones(2, 4), wrong, &ws), Error);
+  EXPECT_THROW(net.Evaluate(Eigen::MatrixXd::Ones(3, 4), E, &ws), Error);
 }
 
 // L(theta, X) = sum_b gy_b . y_b + <GJ_b, J_b>, evaluated with Jets seeded on

@@ -82,9 +82,11 @@ TEST_P(PushingModelTest, BatchedForwardAndTemplatedPathsAgree) {
   Eigen::MatrixXd predicted(3, 9), taped(3, 9);
   model.PredictBatch(states, actions, predicted, *ws);
   model.Forward(states, actions, taped, *ws);
-  EXPECT_EQ((predicted - taped).cwiseAbs().maxCoeff(), 0.0);
   // odeint's dopri5 picks other steps (max norm) than the batched RMS controller.
   const double tol = TableauOf(config.method).adaptive ? 1e-10 : 1e-12;
+  // PredictBatch runs the values-only products (Mlp::Evaluate), Forward the taped
+  // ones: equal up to rounding.
+  EXPECT_LT((predicted - taped).cwiseAbs().maxCoeff(), tol);
   for (int j = 0; j < 9; ++j) {
     const Eigen::Vector3d single =
         model.Predict<double>(states.col(j), actions.col(j));

@@ -54,6 +54,7 @@
 #include "diffdyn/autodiff_ode/parallel.h"
 #include "diffdyn/models/activations.h"
 #include "diffdyn/models/gemm.h"
+#include "diffdyn/models/layer_kernel.h"
 
 namespace diffdyn {
 
@@ -162,6 +163,7 @@ class MlpWorkspace {
     Eigen::MatrixXd abar[2], dbar, ubar[2], zbar;
     Eigen::VectorXd weight_t;          // W_l^T of a thin layer, kThinSide x width (reverse sweep)
     Eigen::VectorXd grad;
+    Eigen::VectorXd block;             // two feature-major blocks, width x kLayerBlock (Evaluate)
     int count = 0;                 // samples in this chunk after the last Forward
     bool has_jacobian = false;     // whether the last Forward built the chain
     bool allocated_jacobian = false;
@@ -180,6 +182,7 @@ class MlpWorkspace {
       weight_t.resize(Eigen::Index(kThinSide) * width);
       abar[1].resize(width, cap);
       grad.resize(arch.num_parameters());
+      if constexpr (kHaveLayerKernel) block.resize(Eigen::Index(2) * width * kLayerBlock);
       if (jacobian) {
         ddg.resize(layers);
         u.resize(layers);
@@ -206,7 +209,7 @@ class MlpWorkspace {
   MlpArchitecture arch_;
   int chunk_size_ = kDefaultChunkSize;
   bool jacobian_ = false;
-  int batch_ = 0;  // batch size of the last Forward
+  int batch_ = 0;  // batch size of the last Forward; -1 after Evaluate (no tape)
   std::vector<Chunk> chunks_;
 };
 
@@ -405,6 +408,37 @@ class Mlp {
     });
   }
 
+  /// Values only: Y = f(X) for the batch X (n_0 x B) into Y (n_L x B, sized by
+  /// the caller), keeping no tape: a Backward on `ws` afterwards needs a Forward
+  /// first. Equal to Forward's Y up to rounding (about 1e-15 relative). Where
+  /// kHaveLayerKernel holds (AVX-512), blocks of kLayerBlock samples run through
+  /// all layers in registers and cache (layer_kernel.h), ReLU and bias fused into
+  /// the products; each sample's value then does not depend on the batch, the
+  /// chunking or the thread count. Elsewhere it runs Forward's BLAS products.
+  /// Chunks of ws->chunk_size() samples over `threads` threads (<= 0: all cores).
+  void Evaluate(const Eigen::Ref<const Eigen::MatrixXd>& X, Eigen::Ref<Eigen::MatrixXd> Y,
+                MlpWorkspace* ws, int threads = 1) const
+    requires std::is_same_v<T, double>
+  {
+    DIFFDYN_CHECK(X.rows() == num_inputs(), "MLP expects inputs with ", num_inputs(),
+                  " rows, got ", X.rows());
+    DIFFDYN_CHECK(Y.rows() == num_outputs() && Y.cols() == X.cols(), "Mlp::Evaluate: output is ",
+                  Y.rows(), " x ", Y.cols(), ", expected ", num_outputs(), " x ", X.cols());
+    DIFFDYN_CHECK(ws != nullptr, "Mlp::Evaluate needs a workspace");
+    const int batch = static_cast<int>(X.cols());
+    ws->Reserve(arch_, batch, false);
+    ws->batch_ = -1;
+    ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
+      const auto x = X.middleCols(begin, end - begin);
+      auto y = Y.middleCols(begin, end - begin);
+      if constexpr (kHaveLayerKernel) {
+        EvaluateChunk(x, y, &ws->chunks_[c]);
+      } else {
+        ForwardChunk(x, y, nullptr, begin, &ws->chunks_[c]);
+      }
+    });
+  }
+
   /// Reverse mode after Forward(X, ...) on the same workspace. Given cotangents
   /// gy = dL/dY (n_L x B, or empty for none) and gjac = dL/dJ (n_L x n_0 B in
   /// the layout of Forward's J, or empty for none; needs Forward with J), writes
@@ -591,6 +625,44 @@ class Mlp {
     }
   }
 
+  // Evaluate over one chunk with the layer kernel: per block of kLayerBlock
+  // samples, inputs transposed to feature-major (zero-padded), every layer
+  // between the chunk's two block buffers, outputs transposed back.
+  template <typename XBlock, typename YBlock>
+  void EvaluateChunk(const XBlock& x, YBlock& y, MlpWorkspace::Chunk* ch) const {
+    if constexpr (kHaveLayerKernel) {
+      constexpr int kB = kLayerBlock;
+      const int nb = static_cast<int>(x.cols());
+      const int L = arch_.num_layers();
+      double* const first = ch->block.data();
+      double* const second = first + Eigen::Index(arch_.max_width()) * kB;
+      for (int s0 = 0; s0 < nb; s0 += kB) {
+        const int ns = std::min(kB, nb - s0);
+        for (int i = 0; i < num_inputs(); ++i) {
+          double* row = first + i * kB;
+          for (int s = 0; s < ns; ++s) row[s] = x(i, s0 + s);
+          std::fill(row + ns, row + kB, 0.0);
+        }
+        double* in = first;
+        double* out = second;
+        for (int l = 0; l < L; ++l) {
+          const int rows = arch_.sizes[l + 1];
+          const bool hidden = l + 1 < L;
+          const bool relu = hidden && arch_.activations[l].kind == ActivationKind::kRelu;
+          internal::LayerBlock(W(l).data(), rows, arch_.sizes[l], b(l).data(), in, relu, out);
+          if (hidden && !relu) {
+            ApplyActivation(arch_.activations[l], out, Eigen::Index(rows) * kB, out, nullptr,
+                            nullptr);
+          }
+          std::swap(in, out);
+        }
+        for (int s = 0; s < ns; ++s) {
+          for (int i = 0; i < num_outputs(); ++i) y(i, s0 + s) = in[i * kB + s];
+        }
+      }
+    }
+  }
+
   // out = W_l^T abar. A thin W_l (a side of at most kThinSide) is transposed into
   // the chunk's buffer first: BLAS runs the plain product of the copy up to 2.5x
   // faster than the transposed one for these shapes (6 x 100 times 6 x 250).
@@ -616,6 +688,8 @@ class Mlp {
                     Eigen::MatrixXd* grad_inputs, MlpWorkspace* ws, int threads,
                     MlpWorkspace* scratch = nullptr) const {
     DIFFDYN_CHECK(ws != nullptr, "Mlp::Backward needs a workspace");
+    DIFFDYN_CHECK(ws->batch_ >= 0, "Mlp::Backward needs a Forward on this workspace; its last ",
+                  "pass was Evaluate, which keeps no tape");
     if (scratch == nullptr) scratch = ws;
     const int batch = ws->batch_;
     const int n0 = num_inputs();

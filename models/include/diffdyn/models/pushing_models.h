@@ -209,11 +209,11 @@ struct MlpOdeSystem {
       }
       cache->inputs[k] = z;
       net->Forward(cache->inputs[k], &ws.output, nullptr, &cache->workspaces[k]);
+      dzdt = ws.output;
     } else {
-      ws.input = z;
-      net->Forward(ws.input, &ws.output, nullptr, &ws.mlp);
+      // Not kept for a backward pass (a Vjp here recomputes): values only.
+      net->Evaluate(z, dzdt, &ws.mlp);
     }
-    dzdt = ws.output;
   }
   /// vjp_z = (dM/dz)^T lambda per column (6 x B); grad_theta += sum_b (dM/dtheta)^T lambda_b.
   /// Reuses a cached forward pass at exactly this z (searching down from the most recent
@@ -440,9 +440,11 @@ class PushingModel final : public TransitionModel {
       ws.solver->Forward(ws.input, ws.times, &ws.outputs, tape);
       ws.cache.recording = false;
       next = ws.outputs[1].topRows(3);
-    } else {
+    } else if (tape) {
       net_.Forward(ws.input, &ws.output, nullptr, &ws.mlp);
       next = ws.output;
+    } else {
+      net_.Evaluate(ws.input, next, &ws.mlp);
     }
     if (IsResidual(config_.type)) next += states;
     ws.taped = tape;
