@@ -124,7 +124,8 @@ void Mppi::RolloutChunk(int chunk, int begin, int end, const Eigen::VectorXd& x)
     SplitMix64 stream(MixSeed(seed_, commands_, static_cast<std::uint64_t>(begin + k)));
     FillStandardNormal(stream, z + k * per_sample, per_sample);
   }
-  const bool lower = options_.u_min.size() == m, upper = options_.u_max.size() == m;
+  const double* lo = options_.u_min.size() == m ? options_.u_min.data() : nullptr;
+  const double* hi = options_.u_max.size() == m ? options_.u_max.data() : nullptr;
   const double* chol = chol_.data();  // column-major, lower triangular
   s.states.colwise() = x;
   auto costs = costs_.segment(begin, width);
@@ -135,18 +136,20 @@ void Mppi::RolloutChunk(int chunk, int begin, int end, const Eigen::VectorXd& x)
     double* eps = noise_[t].data() + Eigen::Index(begin) * m;
     const double* u = nominal_.col(t).data();
     const double* wu = weighted_nominal_.col(t).data();
+    // (restrict: the writes to a and eps_k leave the inputs' loads in registers)
     for (int k = 0; k < width; ++k) {
-      const double* e = z + k * per_sample + Eigen::Index(t) * m;
-      double* a = s.actions.col(k).data();
+      const double* __restrict e = z + k * per_sample + Eigen::Index(t) * m;
+      double* __restrict a = s.actions.col(k).data();
+      double* __restrict eps_k = eps + Eigen::Index(k) * m;
       double perturbation_cost = 0;
       for (int i = 0; i < m; ++i) {
         double v = 0;
         for (int j = 0; j <= i; ++j) v += chol[i + j * m] * e[j];
         v += u[i];
-        if (lower) v = std::max(v, options_.u_min[i]);
-        if (upper) v = std::min(v, options_.u_max[i]);
+        if (lo) v = std::max(v, lo[i]);
+        if (hi) v = std::min(v, hi[i]);
         a[i] = v;
-        eps[Eigen::Index(k) * m + i] = v - u[i];
+        eps_k[i] = v - u[i];
         perturbation_cost += wu[i] * (v - u[i]);
       }
       costs[k] += perturbation_cost;

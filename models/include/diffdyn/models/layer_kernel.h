@@ -60,7 +60,10 @@ inline void LayerTile(const double* w, int ldw, int k, const double* b, const do
   for (int r = 0; r < R; ++r) {
     for (int v = 0; v < kVecs; ++v) acc[r][v] = LayerVec{} + b[r];
   }
-  for (int j = 0; j < k; ++j) {
+  // k >= 1 (layer widths are positive): a do-while keeps the accumulators in
+  // registers from the start (with a zero-trip path GCC parks them on the stack).
+  int j = 0;
+  do {
     LayerVec x[kVecs];
     for (int v = 0; v < kVecs; ++v) {
       x[v] = *reinterpret_cast<const LayerVecU*>(h + j * kLayerBlock + v * kLayerLanes);
@@ -69,7 +72,7 @@ inline void LayerTile(const double* w, int ldw, int k, const double* b, const do
       const double wr = w[j * ldw + r];
       for (int v = 0; v < kVecs; ++v) acc[r][v] += wr * x[v];
     }
-  }
+  } while (++j < k);
   for (int r = 0; r < R; ++r) {
     for (int v = 0; v < kVecs; ++v) {
       LayerVec a = acc[r][v];
@@ -98,7 +101,7 @@ inline void LayerRows(const double* w, int m, int k, const double* b, const doub
 }
 
 /// One layer on one block: c = g(W h + b) with g = ReLU if `relu`, else the
-/// identity. W is m x k column-major (leading dimension m), b has m entries,
+/// identity. W is m x k column-major (leading dimension m, k >= 1), b has m entries,
 /// h is k x kLayerBlock and c is m x kLayerBlock, both feature-major (row
 /// stride kLayerBlock); c must not overlap h.
 inline void LayerBlock(const double* w, int m, int k, const double* b, const double* h, bool relu,
