@@ -41,6 +41,7 @@
 //   MlpWorkspace ws(net.architecture(), 256);
 //   net.Forward(X, &Y, &J, &ws);                   // values and Jacobians
 //   net.Backward(Gy, GJ, &grad, nullptr, &ws);     // dL/dtheta
+//   net.Evaluate(X, Y, &ws);                       // values only, no tape (fast path)
 #pragma once
 
 #include <algorithm>
