@@ -164,7 +164,7 @@ class MlpWorkspace {
     Eigen::MatrixXd abar[2], dbar, ubar[2], zbar;
     Eigen::VectorXd weight_t;          // W_l^T of a thin layer, kThinSide x width (reverse sweep)
     Eigen::VectorXd grad;
-    Eigen::VectorXd block;             // two feature-major blocks, width x kLayerBlock (Evaluate)
+    Eigen::VectorXd block;             // 2 feature-major blocks, width x kLayerBlock (Evaluate)
     int count = 0;                 // samples in this chunk after the last Forward
     bool has_jacobian = false;     // whether the last Forward built the chain
     bool allocated_jacobian = false;
@@ -183,7 +183,6 @@ class MlpWorkspace {
       weight_t.resize(Eigen::Index(kThinSide) * width);
       abar[1].resize(width, cap);
       grad.resize(arch.num_parameters());
-      if constexpr (kHaveLayerKernel) block.resize(Eigen::Index(2) * width * kLayerBlock);
       if (jacobian) {
         ddg.resize(layers);
         u.resize(layers);
@@ -429,6 +428,13 @@ class Mlp {
     const int batch = static_cast<int>(X.cols());
     ws->Reserve(arch_, batch, false);
     ws->batch_ = -1;
+    if constexpr (kHaveLayerKernel) {
+      // The kernel's block buffers, only in workspaces that evaluate (not in tapes).
+      const Eigen::Index block_size = Eigen::Index(2) * arch_.max_width() * kLayerBlock;
+      for (int c = 0; c < NumChunks(batch, ws->chunk_size()); ++c) {
+        if (ws->chunks_[c].block.size() != block_size) ws->chunks_[c].block.resize(block_size);
+      }
+    }
     ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
       const auto x = X.middleCols(begin, end - begin);
       auto y = Y.middleCols(begin, end - begin);
