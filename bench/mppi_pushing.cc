@@ -15,9 +15,11 @@
 // of --benchmark_out, else $BENCH_OUT, else build/bench-results) so that the PyTorch
 // reference bench/mppi_pushing_torch.py runs the SAME models.
 //
-// Counters: "GFLOP/s" counts the useful matrix flops of a command, 2 x (multiply-adds
+// Counters: "GFLOP/s" counts the dense matrix flops of a command, 2 x (multiply-adds
 // of one MLP evaluation) x K x T x (evaluations per step: 36 for rk4 on 9 steps, 1 for
-// the NN); cpu_time is the whole process's CPU time (both threads).
+// the NN), what PyTorch computes; the layer kernel skips ReLU units that are zero for a
+// whole block of 32 samples, so this rate can exceed the machine's dgemm peak; cpu_time
+// is the whole process's CPU time (both threads).
 //
 //   OPENBLAS_NUM_THREADS=1 build/bench/bench_mppi_pushing   (from the repository root)
 #include <benchmark/benchmark.h>

@@ -221,6 +221,45 @@ TEST(Mlp, EvaluateIsIndependentOfBatchChunksAndThreads) {
   }
 }
 
+// The layer kernel skips hidden units that are zero for a whole block of samples.
+// Units dead everywhere, units dead in one block only, and a layer dead in every
+// unit (the next layer then sees only its biases) must all give Forward's values.
+TEST(Mlp, EvaluateSkipsInactiveUnitsExactly) {
+  Rng rng(29);
+  MlpArchitecture arch{{6, 100, 100, 3}, {Activation::Relu(), Activation::Relu()}};
+  Eigen::VectorXd theta = RandomVector(arch.num_parameters(), 0.3, rng);
+  const Eigen::Index w0 = arch.WeightOffset(0), b0 = arch.BiasOffset(0);
+  // Units 0-29 never fire; units 40-49 fire only where input 0 is 1.
+  for (int i = 0; i < 30; ++i) theta[b0 + i] = -1e3;
+  for (int i = 40; i < 50; ++i) {
+    for (int j = 0; j < 6; ++j) theta[w0 + i + 100 * j] = j == 0 ? 50.0 : 0.0;
+    theta[b0 + i] = -25.0;
+  }
+  const Mlp<double> net(arch, theta);
+  const int batch = 96;  // blocks [0, 32), [32, 64), [64, 96) with the kernel
+  Eigen::MatrixXd X = RandomMatrix(6, batch, 1.0, rng);
+  X.row(0).setOnes();
+  X.row(0).segment(32, 32).setZero();  // the second block: units 40-49 dead too
+  MlpWorkspace ws(arch, batch, 64, false);
+  Eigen::MatrixXd Y, E(3, batch);
+  net.Forward(X, &Y, nullptr, &ws);
+  net.Evaluate(X, E, &ws, 2);
+  const double scale = 1.0 + Y.cwiseAbs().maxCoeff();
+  EXPECT_LT((E - Y).cwiseAbs().maxCoeff(), 1e-13 * scale);
+  for (int s : {0, 40, 95}) {
+    const Eigen::VectorXd y = net(Eigen::VectorXd(X.col(s)));
+    EXPECT_LT((E.col(s) - y).cwiseAbs().maxCoeff(), 1e-13 * scale) << "sample " << s;
+  }
+  // Every unit of the second hidden layer dead: the output is the last bias.
+  const Eigen::Index b1 = arch.BiasOffset(1), b2 = arch.BiasOffset(2);
+  for (int i = 0; i < 100; ++i) theta[b1 + i] = -1e4;
+  const Mlp<double> dead(arch, theta);
+  dead.Evaluate(X, E, &ws, 2);
+  for (int s = 0; s < batch; ++s) {
+    for (int i = 0; i < 3; ++i) ASSERT_EQ(E(i, s), theta[b2 + i]) << "sample " << s;
+  }
+}
+
 TEST(Mlp, EvaluateKeepsNoTape) {
   MlpArchitecture arch{{2, 3, 1}, {Activation::Relu()}};
   Rng rng(3);

@@ -165,6 +165,7 @@ class MlpWorkspace {
     Eigen::VectorXd weight_t;          // W_l^T of a thin layer, kThinSide x width (reverse sweep)
     Eigen::VectorXd grad;
     Eigen::VectorXd block;             // 2 feature-major blocks, width x kLayerBlock (Evaluate)
+    std::vector<int> rows;             // 2 lists of a block's live rows, width each (Evaluate)
     int count = 0;                 // samples in this chunk after the last Forward
     bool has_jacobian = false;     // whether the last Forward built the chain
     bool allocated_jacobian = false;
@@ -433,6 +434,7 @@ class Mlp {
       const Eigen::Index block_size = Eigen::Index(2) * arch_.max_width() * kLayerBlock;
       for (int c = 0; c < NumChunks(batch, ws->chunk_size()); ++c) {
         if (ws->chunks_[c].block.size() != block_size) ws->chunks_[c].block.resize(block_size);
+        ws->chunks_[c].rows.resize(std::size_t(2) * arch_.max_width());
       }
     }
     ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
@@ -634,7 +636,8 @@ class Mlp {
 
   // Evaluate over one chunk with the layer kernel: per block of kLayerBlock
   // samples, inputs transposed to feature-major (zero-padded), every layer
-  // between the chunk's two block buffers, outputs transposed back.
+  // between the chunk's two block buffers, each summing over the rows its input
+  // layer reported live, outputs transposed back.
   template <typename XBlock, typename YBlock>
   void EvaluateChunk(const XBlock& x, YBlock& y, MlpWorkspace::Chunk* ch) const {
     if constexpr (kHaveLayerKernel) {
@@ -643,6 +646,8 @@ class Mlp {
       const int L = arch_.num_layers();
       double* const first = ch->block.data();
       double* const second = first + Eigen::Index(arch_.max_width()) * kB;
+      int* const rows_first = ch->rows.data();
+      int* const rows_second = rows_first + arch_.max_width();
       for (int s0 = 0; s0 < nb; s0 += kB) {
         const int ns = std::min(kB, nb - s0);
         for (int i = 0; i < num_inputs(); ++i) {
@@ -652,16 +657,22 @@ class Mlp {
         }
         double* in = first;
         double* out = second;
+        int* in_rows = rows_first;
+        int* out_rows = rows_second;
+        int n_in = num_inputs();
+        for (int i = 0; i < n_in; ++i) in_rows[i] = i;
         for (int l = 0; l < L; ++l) {
           const int rows = arch_.sizes[l + 1];
           const bool hidden = l + 1 < L;
           const bool relu = hidden && arch_.activations[l].kind == ActivationKind::kRelu;
-          internal::LayerBlock(W(l).data(), rows, arch_.sizes[l], b(l).data(), in, relu, out);
+          n_in = internal::LayerBlock(W(l).data(), rows, b(l).data(), in, in_rows, n_in, relu, out,
+                                      out_rows);
           if (hidden && !relu) {
             ApplyActivation(arch_.activations[l], out, Eigen::Index(rows) * kB, out, nullptr,
                             nullptr);
           }
           std::swap(in, out);
+          std::swap(in_rows, out_rows);
         }
         for (int s = 0; s < ns; ++s) {
           for (int i = 0; i < num_outputs(); ++i) y(i, s0 + s) = in[i * kB + s];
