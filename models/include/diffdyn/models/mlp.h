@@ -414,7 +414,8 @@ class Mlp {
   /// first. Equal to Forward's Y up to rounding (about 1e-15 relative). Where
   /// kHaveLayerKernel holds (AVX-512), blocks of kLayerBlock samples run through
   /// all layers in registers and cache (layer_kernel.h), ReLU and bias fused into
-  /// the products; each sample's value then does not depend on the batch, the
+  /// the products, skipping the ReLU units that are zero for the whole block (their
+  /// terms are w * 0); each sample's value then does not depend on the batch, the
   /// chunking or the thread count. Elsewhere it runs Forward's BLAS products.
   /// Chunks of ws->chunk_size() samples over `threads` threads (<= 0: all cores).
   void Evaluate(const Eigen::Ref<const Eigen::MatrixXd>& X, Eigen::Ref<Eigen::MatrixXd> Y,
