@@ -36,17 +36,21 @@
 
 namespace diffdyn {
 
+// 1 where LayerBlock is built (AVX-512 targets with GCC-style vectors), else 0;
+// code that calls LayerBlock must sit under #if DIFFDYN_LAYER_KERNEL.
 #if defined(__AVX512F__) && defined(__GNUC__)
-/// Whether LayerBlock is built (AVX-512 targets with GCC-style vectors).
-inline constexpr bool kHaveLayerKernel = true;
+#define DIFFDYN_LAYER_KERNEL 1
 #else
-inline constexpr bool kHaveLayerKernel = false;
+#define DIFFDYN_LAYER_KERNEL 0
 #endif
+
+/// Whether LayerBlock is built (AVX-512 targets with GCC-style vectors).
+inline constexpr bool kHaveLayerKernel = DIFFDYN_LAYER_KERNEL != 0;
 
 /// Samples per feature-major block of LayerBlock (4 vectors of 8 doubles).
 inline constexpr int kLayerBlock = 32;
 
-#if defined(__AVX512F__) && defined(__GNUC__)
+#if DIFFDYN_LAYER_KERNEL
 namespace internal {
 
 /// Doubles per SIMD vector.

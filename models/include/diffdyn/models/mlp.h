@@ -640,8 +640,10 @@ class Mlp {
   // between the chunk's two block buffers, each summing over the rows its input
   // layer reported live, outputs transposed back.
   template <typename XBlock, typename YBlock>
-  void EvaluateChunk(const XBlock& x, YBlock& y, MlpWorkspace::Chunk* ch) const {
-    if constexpr (kHaveLayerKernel) {
+  void EvaluateChunk([[maybe_unused]] const XBlock& x, [[maybe_unused]] YBlock& y,
+                     [[maybe_unused]] MlpWorkspace::Chunk* ch) const {
+#if DIFFDYN_LAYER_KERNEL
+    {
       constexpr int kB = kLayerBlock;
       const int nb = static_cast<int>(x.cols());
       const int L = arch_.num_layers();
@@ -680,6 +682,7 @@ class Mlp {
         }
       }
     }
+#endif
   }
 
   // out = W_l^T abar. A thin W_l (a side of at most kThinSide) is transposed into
