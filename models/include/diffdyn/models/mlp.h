@@ -643,43 +643,41 @@ class Mlp {
   void EvaluateChunk([[maybe_unused]] const XBlock& x, [[maybe_unused]] YBlock& y,
                      [[maybe_unused]] MlpWorkspace::Chunk* ch) const {
 #if DIFFDYN_LAYER_KERNEL
-    {
-      constexpr int kB = kLayerBlock;
-      const int nb = static_cast<int>(x.cols());
-      const int L = arch_.num_layers();
-      double* const first = ch->block.data();
-      double* const second = first + Eigen::Index(arch_.max_width()) * kB;
-      int* const rows_first = ch->rows.data();
-      int* const rows_second = rows_first + arch_.max_width();
-      for (int s0 = 0; s0 < nb; s0 += kB) {
-        const int ns = std::min(kB, nb - s0);
-        for (int i = 0; i < num_inputs(); ++i) {
-          double* row = first + i * kB;
-          for (int s = 0; s < ns; ++s) row[s] = x(i, s0 + s);
-          std::fill(row + ns, row + kB, 0.0);
+    constexpr int kB = kLayerBlock;
+    const int nb = static_cast<int>(x.cols());
+    const int L = arch_.num_layers();
+    double* const first = ch->block.data();
+    double* const second = first + Eigen::Index(arch_.max_width()) * kB;
+    int* const rows_first = ch->rows.data();
+    int* const rows_second = rows_first + arch_.max_width();
+    for (int s0 = 0; s0 < nb; s0 += kB) {
+      const int ns = std::min(kB, nb - s0);
+      for (int i = 0; i < num_inputs(); ++i) {
+        double* row = first + i * kB;
+        for (int s = 0; s < ns; ++s) row[s] = x(i, s0 + s);
+        std::fill(row + ns, row + kB, 0.0);
+      }
+      double* in = first;
+      double* out = second;
+      int* in_rows = rows_first;
+      int* out_rows = rows_second;
+      int n_in = num_inputs();
+      for (int i = 0; i < n_in; ++i) in_rows[i] = i;
+      for (int l = 0; l < L; ++l) {
+        const int rows = arch_.sizes[l + 1];
+        const bool hidden = l + 1 < L;
+        const bool relu = hidden && arch_.activations[l].kind == ActivationKind::kRelu;
+        n_in = internal::LayerBlock(W(l).data(), rows, b(l).data(), in, in_rows, n_in, relu, out,
+                                    out_rows);
+        if (hidden && !relu) {
+          ApplyActivation(arch_.activations[l], out, Eigen::Index(rows) * kB, out, nullptr,
+                          nullptr);
         }
-        double* in = first;
-        double* out = second;
-        int* in_rows = rows_first;
-        int* out_rows = rows_second;
-        int n_in = num_inputs();
-        for (int i = 0; i < n_in; ++i) in_rows[i] = i;
-        for (int l = 0; l < L; ++l) {
-          const int rows = arch_.sizes[l + 1];
-          const bool hidden = l + 1 < L;
-          const bool relu = hidden && arch_.activations[l].kind == ActivationKind::kRelu;
-          n_in = internal::LayerBlock(W(l).data(), rows, b(l).data(), in, in_rows, n_in, relu, out,
-                                      out_rows);
-          if (hidden && !relu) {
-            ApplyActivation(arch_.activations[l], out, Eigen::Index(rows) * kB, out, nullptr,
-                            nullptr);
-          }
-          std::swap(in, out);
-          std::swap(in_rows, out_rows);
-        }
-        for (int s = 0; s < ns; ++s) {
-          for (int i = 0; i < num_outputs(); ++i) y(i, s0 + s) = in[i * kB + s];
-        }
+        std::swap(in, out);
+        std::swap(in_rows, out_rows);
+      }
+      for (int s = 0; s < ns; ++s) {
+        for (int i = 0; i < num_outputs(); ++i) y(i, s0 + s) = in[i * kB + s];
       }
     }
 #endif
