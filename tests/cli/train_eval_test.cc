@@ -4,6 +4,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -89,6 +90,53 @@ TEST(TrainCommand, TrainsSavesAndEvalReadsBack) {
   sb << b.rdbuf();
   nlohmann::json ja = nlohmann::json::parse(sa.str()), jb = nlohmann::json::parse(sb.str());
   EXPECT_EQ(ja["parameters"], jb["parameters"]);
+}
+
+// --solver / --steps re-integrate a NeuralODE's weights: the model's own settings give
+// the same loss to the bit, two accurate solvers agree, one Euler step does not.
+TEST(EvalCommand, SolverAndStepsOverrideTheNeuralOde) {
+  const std::string csv = WriteTemp("eval_solver_20.csv", Head(20));
+  const std::string node = ::testing::TempDir() + "/eval_solver_node.json";
+  ASSERT_EQ(RunDiffdyn("train --data " + csv + " --model abs-node --hidden 8 --steps 3 --epochs 3"
+                       " --seed 2 --quiet --out " + node).exit_code, 0);
+  auto eval = [&](const std::string& args) {
+    const auto r = RunDiffdyn("eval --model " + node + " --data " + csv + " --json " + args);
+    EXPECT_EQ(r.exit_code, 0) << args << ": " << r.err;
+    return nlohmann::json::parse(r.out);
+  };
+  const auto own = eval("");
+  EXPECT_EQ(own["solver"], "rk4");
+  EXPECT_EQ(own["steps"], 3);
+  const double loss = own["single_step_loss"].get<double>();
+  EXPECT_EQ(eval("--solver rk4 --steps 3")["single_step_loss"].get<double>(), loss);
+
+  const auto fine = eval("--steps 60");
+  const auto adaptive = eval("--solver dopri5");
+  EXPECT_EQ(fine["steps"], 60);
+  EXPECT_EQ(adaptive["solver"], "dopri5");
+  const double reference = adaptive["single_step_loss"].get<double>();
+  EXPECT_NEAR(fine["single_step_loss"].get<double>(), reference, 1e-6 * reference);
+
+  const auto euler = eval("--solver euler --steps 2");
+  EXPECT_EQ(euler["solver"], "euler");
+  EXPECT_EQ(euler["steps"], 2);
+  EXPECT_GT(std::abs(euler["single_step_loss"].get<double>() - reference), 1e-6 * reference);
+
+  // Bad values, and the options on a model without an ODE: exit 2, one line.
+  const std::string nn = ::testing::TempDir() + "/eval_solver_nn.json";
+  ASSERT_EQ(RunDiffdyn("train --data " + csv + " --model res-nn --hidden 8 --epochs 1 --quiet --out " +
+                       nn).exit_code, 0);
+  for (const auto& [model, args, fragment] : std::vector<std::tuple<std::string, std::string,
+                                                                    std::string>>{
+           {node, "--steps 1", "--steps"},
+           {node, "--solver rk5", "--solver"},
+           {nn, "--steps 4", "--steps"},
+           {nn, "--solver dopri5", "--solver"}}) {
+    const auto r = RunDiffdyn("eval --model " + model + " --data " + csv + " " + args);
+    EXPECT_EQ(r.exit_code, 2) << args;
+    EXPECT_EQ(CountLines(r.err), 1) << r.err;
+    EXPECT_NE(r.err.find(fragment), std::string::npos) << r.err;
+  }
 }
 
 TEST(TrainCommand, MultiStepLossUsesFourStepWindows) {
