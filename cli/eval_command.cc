@@ -80,7 +80,8 @@ void RegisterEvalCommand(CLI::App& app) {
                       "NeuralODE only: integrate with this solver instead of the model's (rk4, "
                       "rk4-classic, euler, midpoint, dopri5)");
   const CLI::Option* steps = command->add_option("--steps", o->steps,
-                      "NeuralODE only: grid points on [0, 1] instead of the model's (>= 2)");
+                      "NeuralODE only: grid points on [0, 1] instead of the model's (>= 2)")
+                          ->default_str("");
   command->add_option("--threads", o->threads, "Threads (0: all cores)");
   command->callback([o, solver, steps] {
     o->solver_given = solver->count() > 0;
