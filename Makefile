@@ -1,14 +1,21 @@
 # diffdyn: the commands a newcomer runs.
-#   make demo    install missing dependencies, build, run the main job
-#   make test    install missing dependencies, build, run every test
-#   make bench   benchmarks side by side with the PyTorch reference
+#   make demo        install missing dependencies, build, run the main job
+#   make test        install missing dependencies, build, run every test
+#   make test-quick  the same with the tests labelled `quick` only
+#   make bench       benchmarks side by side with the PyTorch reference
+# Variables: BUILD_DIR (build), BUILD_TYPE (Release), NATIVE (ON: -march=native;
+# OFF: the x86-64 baseline, for binaries that run on other machines), STRICT (OFF;
+# ON turns warnings into errors, as CI does), CXX_COMPILER (CMake's default: g++),
+# JOBS (all cores), CMAKE_FLAGS (more -D options).
 BUILD_DIR ?= build
 BUILD_TYPE ?= Release
 NATIVE ?= ON
+STRICT ?= OFF
+CXX_COMPILER ?=
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test demo bench clean
+.PHONY: all deps configure build test test-quick demo bench clean
 
 all: build
 
@@ -17,6 +24,7 @@ deps:
 
 configure: deps
 	@cmake -S . -B $(BUILD_DIR) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DDIFFDYN_NATIVE=$(NATIVE) \
+	  -DDIFFDYN_STRICT=$(STRICT) $(if $(CXX_COMPILER),-DCMAKE_CXX_COMPILER=$(CXX_COMPILER)) \
 	  $(CMAKE_FLAGS) >/dev/null
 
 build: configure
@@ -24,6 +32,9 @@ build: configure
 
 test: build
 	@cd $(BUILD_DIR) && ctest -j $(JOBS) --output-on-failure --timeout 900
+
+test-quick: build
+	@cd $(BUILD_DIR) && ctest -j $(JOBS) --output-on-failure --timeout 900 -L quick
 
 demo: build
 	@$(BUILD_DIR)/cli/diffdyn demo --out demo-output

@@ -81,12 +81,16 @@ void SaveExtendedModel(const std::filesystem::path& path, const ExtendedModel& m
     const int n = model.dof();
     arch["residual"] = {{"inputs", 3 * n}, {"hidden", net->w1.rows()}, {"outputs", n},
                         {"activation", "tanh"}};
-    for (const Eigen::MatrixXd* m : {&static_cast<const Eigen::MatrixXd&>(net->in_mean),
-                                     &static_cast<const Eigen::MatrixXd&>(net->in_scale), &net->w1,
-                                     &static_cast<const Eigen::MatrixXd&>(net->b1), &net->w2,
-                                     &static_cast<const Eigen::MatrixXd&>(net->b2)}) {
-      theta.insert(theta.end(), m->data(), m->data() + m->size());
-    }
+    // Vectors and matrices appended in place (column-major), no temporaries.
+    const auto append = [&theta](const auto& m) {
+      theta.insert(theta.end(), m.data(), m.data() + m.size());
+    };
+    append(net->in_mean);
+    append(net->in_scale);
+    append(net->w1);
+    append(net->b1);
+    append(net->w2);
+    append(net->b2);
   } else {
     arch["residual"] = nullptr;
   }

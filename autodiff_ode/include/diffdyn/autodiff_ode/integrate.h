@@ -49,6 +49,7 @@
 #include <boost/numeric/odeint/external/eigen/eigen_resize.hpp>
 #include <boost/numeric/odeint/stepper/controlled_runge_kutta.hpp>
 #include <boost/numeric/odeint/stepper/explicit_error_generic_rk.hpp>
+#include <boost/numeric/odeint/stepper/euler.hpp>
 #include <boost/numeric/odeint/stepper/explicit_generic_rk.hpp>
 #include <ceres/jet.h>
 
@@ -148,11 +149,18 @@ CoefA TableauA(const ButcherTableau& tab, std::index_sequence<I...>) {
 
 }  // namespace internal
 
-/// odeint fixed-step stepper of `M` (a fixed-step method) on states of type State.
+/// odeint fixed-step stepper of `M` (a fixed-step method) on states of type State:
+/// odeint's `euler` for the one-stage method (explicit_generic_rk<1> declares a
+/// zero-length array, which only g++ accepts), explicit_generic_rk otherwise.
 template <Method M, typename State, typename Algebra = EigenJetAlgebra<>>
-using FixedStepper = boost::numeric::odeint::explicit_generic_rk<
-    TableauOf(M).stages, TableauOf(M).order, State, double, State, double, Algebra,
-    boost::numeric::odeint::default_operations, boost::numeric::odeint::initially_resizer>;
+using FixedStepper = std::conditional_t<
+    TableauOf(M).stages == 1,
+    boost::numeric::odeint::euler<State, double, State, double, Algebra,
+                                  boost::numeric::odeint::default_operations,
+                                  boost::numeric::odeint::initially_resizer>,
+    boost::numeric::odeint::explicit_generic_rk<
+        TableauOf(M).stages, TableauOf(M).order, State, double, State, double, Algebra,
+        boost::numeric::odeint::default_operations, boost::numeric::odeint::initially_resizer>>;
 
 /// odeint error stepper (embedded pair) of `M` (dopri5 or cash-karp).
 template <Method M, typename State, typename Algebra = EigenJetAlgebra<>>
@@ -171,10 +179,15 @@ template <Method M, typename State, typename Algebra = EigenJetAlgebra<>>
 FixedStepper<M, State, Algebra> MakeFixedStepper() {
   using Stepper = FixedStepper<M, State, Algebra>;
   constexpr int kS = TableauOf(M).stages;
-  const ButcherTableau& tab = TableauOf(M);
-  return Stepper(internal::TableauA<typename Stepper::coef_a_type>(
+  if constexpr (kS == 1) {
+    static_assert(TableauOf(M).b[0] == 1.0 && TableauOf(M).c[0] == 0.0, "one stage is Euler");
+    return Stepper();
+  } else {
+    const ButcherTableau& tab = TableauOf(M);
+    return Stepper(internal::TableauA<typename Stepper::coef_a_type>(
                      tab, std::make_index_sequence<kS - 1>{}),
-                 internal::TableauVector<kS>(tab.b), internal::TableauVector<kS>(tab.c));
+                   internal::TableauVector<kS>(tab.b), internal::TableauVector<kS>(tab.c));
+  }
 }
 
 /// Builds the odeint controlled stepper of embedded method M: error = h sum (b - b_hat) k,

@@ -171,7 +171,7 @@ struct Panda {
     const auto frames = Frames<T>(q);
     Eigen::Matrix<T, 3, 7> coms;
     for (int i = 0; i < 7; ++i) {
-      const Eigen::Matrix<T, 3, 1> c(T(kCom[i][0]), T(kCom[i][1]), T(kCom[i][2]));
+      const Eigen::Matrix<T, 3, 1> c = Eigen::Vector3d(kCom[i][0], kCom[i][1], kCom[i][2]).cast<T>();
       coms.col(i) = frames[i].R * c + frames[i].p;
     }
     return coms;

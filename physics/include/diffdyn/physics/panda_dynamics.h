@@ -78,7 +78,7 @@ struct PandaModel {
       w = w_new;
       dw = dw_new;
       a = a_origin;
-      Vec3 c(T(Panda::kCom[i][0]), T(Panda::kCom[i][1]), T(Panda::kCom[i][2]));
+      const Vec3 c = Eigen::Vector3d(Panda::kCom[i][0], Panda::kCom[i][1], Panda::kCom[i][2]).cast<T>();
       com[i] = c;
       const Mat3 inertia = (link_scale * Panda::InertiaMatrix(i)).template cast<T>();
       const T mass = T(link_scale * Panda::kMass[i]);

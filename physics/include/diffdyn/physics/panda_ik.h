@@ -70,8 +70,12 @@ class PandaIk {
     for (int it = 0; it <= options_.max_iterations; ++it) {
       const auto tool = Panda::Tool<double>(result.q, options_.tool_length);
       const Eigen::Vector3d tilt = tool.R.col(2).cross(axis);
+      // Fixed-size blocks: the comma initializer's dynamic block makes g++ 12 at
+      // -march=znver3 report a false -Warray-bounds inside Eigen's AVX loads.
       Eigen::Matrix<double, 5, 1> err;
-      err << target - tool.p, u.dot(tilt), v.dot(tilt);
+      err.head<3>() = target - tool.p;
+      err[3] = u.dot(tilt);
+      err[4] = v.dot(tilt);
       result.position_error = err.head<3>().norm();
       result.iterations = it;
       if (result.position_error < options_.position_tolerance &&
