@@ -30,7 +30,7 @@
 #include <string>
 #include <string_view>
 
-#include "diffdyn/models/pushing_models.h"
+#include "diffdyn/models/learned_model.h"
 #include "diffdyn/solvers/mppi.h"
 #include "diffdyn/solvers/pushing_cost.h"
 #include "peak_dgemm.h"
@@ -40,22 +40,22 @@ namespace {
 
 constexpr int kSamples = 1000;
 
-PushingModel MakeModel(PushingModelType type) {
-  PushingModelConfig config;
+LearnedModel MakeModel(LearnedKind type) {
+  LearnedModelConfig config;
   config.type = type;
   config.hidden = 100;
   config.method = Method::kRk4;
   config.steps = 10;
-  return PushingModel::Initialized(config, 42);
+  return LearnedModel::Initialized(config, 42);
 }
 
-const PushingModel& AbsNode() {
-  static const PushingModel model = MakeModel(PushingModelType::kAbsNode);
+const LearnedModel& AbsNode() {
+  static const LearnedModel model = MakeModel(LearnedKind::kAbsNode);
   return model;
 }
 
-const PushingModel& ResNn() {
-  static const PushingModel model = MakeModel(PushingModelType::kResNn);
+const LearnedModel& ResNn() {
+  static const LearnedModel model = MakeModel(LearnedKind::kResNn);
   return model;
 }
 
@@ -79,7 +79,7 @@ MppiOptions TaskOptions(int horizon, int threads) {
 // Multiply-adds of one evaluation of an MLP 6-100-100-out, times 2.
 double FlopsPerEval(int out) { return 2.0 * (6 * 100 + 100 * 100 + 100 * out); }
 
-void RunCommands(benchmark::State& state, const PushingModel& model, double evals_per_step) {
+void RunCommands(benchmark::State& state, const LearnedModel& model, double evals_per_step) {
   const int horizon = static_cast<int>(state.range(0));
   const int threads = static_cast<int>(state.range(1));
   const PushingCost cost({0.8, -0.1, 0.0}, /*obstacle=*/true);
@@ -92,7 +92,7 @@ void RunCommands(benchmark::State& state, const PushingModel& model, double eval
     Eigen::VectorXd u = mppi.Command(x);
     benchmark::DoNotOptimize(u.data());
   }
-  const int out = model.config().type == PushingModelType::kAbsNode ? 6 : 3;
+  const int out = model.config().type == LearnedKind::kAbsNode ? 6 : 3;
   const double flops = FlopsPerEval(out) * evals_per_step * kSamples * horizon;
   state.counters["GFLOP/s"] =
       benchmark::Counter(flops * 1e-9, benchmark::Counter::kIsIterationInvariantRate);
@@ -145,8 +145,8 @@ int main(int argc, char** argv) {
   const fs::path dir = diffdyn::FindOutputDir(argc, argv);
   fs::create_directories(dir);
   const nlohmann::json provenance = {{"program", "bench_mppi_pushing"}, {"seed", 42}};
-  diffdyn::SavePushingModel(dir / "mppi_abs_node.json", diffdyn::AbsNode(), provenance);
-  diffdyn::SavePushingModel(dir / "mppi_res_nn.json", diffdyn::ResNn(), provenance);
+  diffdyn::SaveLearnedModel(dir / "mppi_abs_node.json", diffdyn::AbsNode(), provenance);
+  diffdyn::SaveLearnedModel(dir / "mppi_res_nn.json", diffdyn::ResNn(), provenance);
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
   benchmark::RunSpecifiedBenchmarks();

@@ -51,12 +51,12 @@ constexpr double kFlopsPerEval = 2.0 * (6 * 100 + 100 * 100 + 100 * 6);
 void RunEpochs(benchmark::State& state, Method method) {
   const int threads = static_cast<int>(state.range(0));
   const int chunk_size = static_cast<int>(state.range(1));
-  PushingModelConfig config;
-  config.type = PushingModelType::kAbsNode;
+  LearnedModelConfig config;
+  config.type = LearnedKind::kAbsNode;
   config.method = method;
   config.steps = 10;
   config.hidden = 100;
-  PushingModel model = PushingModel::Initialized(config, 1);
+  LearnedModel model = LearnedModel::Initialized(config, 1);
   TrainOptions options;
   options.epochs = 1;
   options.batch_size = 500;

@@ -26,9 +26,10 @@
 #include "diffdyn/autodiff_ode/io.h"
 #include "diffdyn/autodiff_ode/progress.h"
 #include "diffdyn/autodiff_ode/random.h"
-#include "diffdyn/models/pushing_models.h"
+#include "diffdyn/models/learned_model.h"
 #include "diffdyn/physics/pushing_collect.h"
 #include "diffdyn/physics/pushing_csv.h"
+#include "diffdyn/physics/pushing_system.h"
 #include "diffdyn/solvers/pushing_training.h"
 #include "diffdyn/solvers/pushing_trials.h"
 #include "diffdyn/solvers/trajectory_fit.h"
@@ -207,14 +208,15 @@ void RunDemo(const DemoOptions& options) {
 
   // Stage 2: the absolute NeuralODE, trained as diffdyn train does (read back from the CSV).
   t0 = Clock::now();
-  PushingModelConfig config;
-  config.type = PushingModelType::kAbsNode;
+  LearnedModelConfig config;
+  config.type = LearnedKind::kAbsNode;
+  config.system = PushingSystem();
   config.method = Method::kRk4;
   config.steps = 10;
   config.hidden = 100;
   config.Validate();
   const PushingWindows windows = MakePushingWindows(ReadPushingData(out / "pushes.csv"), 1);
-  PushingModel model = PushingModel::Initialized(config, seed);
+  LearnedModel model = LearnedModel::Initialized(config, seed);
   TrainOptions train;
   train.epochs = options.epochs;
   train.seed = seed;
@@ -224,7 +226,7 @@ void RunDemo(const DemoOptions& options) {
   Trainer trainer(&model, train);
   const TrainResult trained = trainer.Train(windows);
   const fs::path model_path = out / "abs-node.json";
-  SavePushingModel(model_path, model,
+  SaveLearnedModel(model_path, model,
                    {{"command", "diffdyn demo"}, {"data", (out / "pushes.csv").string()},
                     {"seed", seed}, {"loss", "single"}, {"epochs", options.epochs},
                     {"lr", train.learning_rate}, {"batch", train.batch_size},

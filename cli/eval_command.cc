@@ -9,7 +9,7 @@
 #include <fmt/core.h>
 
 #include "command.h"
-#include "diffdyn/models/pushing_models.h"
+#include "diffdyn/models/learned_model.h"
 #include "diffdyn/physics/pushing_csv.h"
 #include "diffdyn/solvers/pushing_training.h"
 
@@ -28,19 +28,19 @@ struct EvalCommandOptions {
 };
 
 // The model file's network with the solver and grid of the options where given.
-PushingModel LoadWithSolver(const EvalCommandOptions& o) {
-  const PushingModel model = LoadPushingModel(o.model);
+LearnedModel LoadWithSolver(const EvalCommandOptions& o) {
+  const LearnedModel model = LoadLearnedModel(o.model);
   if (!o.solver_given && !o.steps_given) return model;
   DIFFDYN_CHECK(IsNeuralOde(model.config().type), o.solver_given ? "--solver" : "--steps",
                 ": applies to NeuralODE models only; the model in ", o.model, " is ", model.kind());
-  PushingModelConfig config = model.config();
+  LearnedModelConfig config = model.config();
   if (o.solver_given) config.method = ParseMethod(o.solver);
   if (o.steps_given) config.steps = o.steps;
-  return PushingModel(config, model.net());
+  return LearnedModel(config, model.net());
 }
 
 void RunEval(const EvalCommandOptions& o) {
-  const PushingModel model = LoadWithSolver(o);
+  const LearnedModel model = LoadWithSolver(o);
   const auto trajectories = ReadPushingData(o.data);
   const PushingEvaluation e = EvaluatePushingModel(model, trajectories, o.threads);
   const bool ode = IsNeuralOde(model.config().type);

@@ -24,7 +24,7 @@
 #include "command.h"
 #include "diffdyn/autodiff_ode/io.h"
 #include "diffdyn/autodiff_ode/progress.h"
-#include "diffdyn/models/pushing_models.h"
+#include "diffdyn/models/learned_model.h"
 #include "diffdyn/physics/pushing_oracle.h"
 #include "plot.h"
 
@@ -34,7 +34,11 @@ std::unique_ptr<TransitionModel> LoadPushModel(const std::string& name, const Pu
   DIFFDYN_CHECK(!name.empty(), "--model: empty (a pushing model file or 'oracle')");
   if (name == "oracle") return std::make_unique<PushingOracle>(world);
   DIFFDYN_CHECK(std::filesystem::is_regular_file(name), "--model ", name, ": no such file");
-  return std::make_unique<PushingModel>(LoadPushingModel(name));
+  auto model = std::make_unique<LearnedModel>(LoadLearnedModel(name));
+  DIFFDYN_CHECK(model->state_size() == 3 && model->action_size() == 3, "--model ", name,
+                ": a pushing model has 3 states and 3 actions, this one has ", model->state_size(),
+                " and ", model->action_size());
+  return model;
 }
 
 void WritePushTrialsCsv(const std::filesystem::path& path, const PushTrialsSummary& summary) {

@@ -9,8 +9,9 @@
 
 #include "command.h"
 #include "diffdyn/autodiff_ode/butcher.h"
-#include "diffdyn/models/pushing_models.h"
+#include "diffdyn/models/learned_model.h"
 #include "diffdyn/physics/pushing_csv.h"
+#include "diffdyn/physics/pushing_system.h"
 #include "diffdyn/solvers/pushing_training.h"
 
 namespace diffdyn::cli {
@@ -37,8 +38,9 @@ struct TrainCommandOptions {
 nlohmann::json Number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
 
 void RunTrain(const TrainCommandOptions& o) {
-  PushingModelConfig config;
-  config.type = ParsePushingModelType(o.model);
+  LearnedModelConfig config;
+  config.type = ParseLearnedKind(o.model);
+  config.system = PushingSystem();
   config.method = ParseMethod(o.solver);
   config.steps = o.steps;
   config.hidden = o.hidden;
@@ -49,7 +51,7 @@ void RunTrain(const TrainCommandOptions& o) {
   const auto trajectories = ReadPushingData(o.data);
   const PushingWindows data = MakePushingWindows(trajectories, horizon);
 
-  PushingModel model = PushingModel::Initialized(config, o.common.seed);
+  LearnedModel model = LearnedModel::Initialized(config, o.common.seed);
   TrainOptions options;
   options.epochs = o.epochs;
   options.learning_rate = o.lr;
@@ -70,7 +72,7 @@ void RunTrain(const TrainCommandOptions& o) {
   const nlohmann::json metrics = {{"final_train_loss", Number(result.final_train_loss)},
                                   {"final_val_loss", Number(result.final_val_loss)},
                                   {"seconds_per_epoch", result.seconds_per_epoch}};
-  SavePushingModel(o.out, model, provenance, metrics);
+  SaveLearnedModel(o.out, model, provenance, metrics);
 
   if (o.common.json) {
     PrintJson({{"model_path", o.out},

@@ -30,9 +30,10 @@
 
 #include "diffdyn/autodiff_ode/io.h"
 #include "diffdyn/autodiff_ode/progress.h"
-#include "diffdyn/models/pushing_models.h"
+#include "diffdyn/models/learned_model.h"
 #include "diffdyn/physics/pushing_collect.h"
 #include "diffdyn/physics/pushing_oracle.h"
+#include "diffdyn/physics/pushing_system.h"
 #include "diffdyn/solvers/pushing_trials.h"
 #include "diffdyn/solvers/pushing_training.h"
 #include "../figure_main.h"
@@ -80,25 +81,26 @@ std::vector<std::string> SplitList(const std::string& s) {
 }
 
 // The paper's learning rate for each model.
-double LearningRate(PushingModelType type) {
-  return type == PushingModelType::kResNode ? 1e-2 : 1e-3;
+double LearningRate(LearnedKind type) {
+  return type == LearnedKind::kResNode ? 1e-2 : 1e-3;
 }
 
-PushingModel TrainModel(PushingModelType type, const PushingWindows& data, const FigureOptions& o,
+LearnedModel TrainModel(LearnedKind type, const PushingWindows& data, const FigureOptions& o,
                         const fs::path& path) {
-  PushingModelConfig config;
+  LearnedModelConfig config;
   config.type = type;
+  config.system = PushingSystem();
   config.hidden = 100;
   config.method = Method::kRk4;
   config.steps = 10;
   if (o.reuse && fs::exists(path)) {
-    PushingModel model = LoadPushingModel(path);
+    LearnedModel model = LoadLearnedModel(path);
     DIFFDYN_CHECK(model.config().type == type, path.string(), ": holds a ", model.kind(),
-                  ", expected ", PushingModelTypeName(type));
+                  ", expected ", LearnedKindName(type));
     if (!o.quiet) fmt::print("{}: reusing {}\n", model.kind(), path.string());
     return model;
   }
-  PushingModel model = PushingModel::Initialized(config, o.seed);
+  LearnedModel model = LearnedModel::Initialized(config, o.seed);
   TrainOptions t;
   t.epochs = o.epochs;
   t.learning_rate = LearningRate(type);
@@ -120,7 +122,7 @@ PushingModel TrainModel(PushingModelType type, const PushingWindows& data, const
   const nlohmann::json metrics = {{"final_train_loss", r.final_train_loss},
                                   {"final_val_loss", r.final_val_loss},
                                   {"seconds_per_epoch", r.seconds_per_epoch}};
-  SavePushingModel(path, model, provenance, metrics);
+  SaveLearnedModel(path, model, provenance, metrics);
   return model;
 }
 
@@ -199,9 +201,9 @@ void Run(FigureOptions o) {
   DIFFDYN_CHECK(o.epochs >= 1, "--epochs must be >= 1, got ", o.epochs);
   DIFFDYN_CHECK(o.trials >= 1, "--trials must be >= 1, got ", o.trials);
   DIFFDYN_CHECK(o.oracle_trials >= 0, "--oracle-trials must be >= 0, got ", o.oracle_trials);
-  std::vector<PushingModelType> types;
+  std::vector<LearnedKind> types;
   for (const std::string& name : SplitList(o.models)) {
-    types.push_back(ParsePushingModelType(name, "--models"));
+    types.push_back(ParseLearnedKind(name, "--models"));
   }
   const fs::path dir(o.out);
   fs::create_directories(dir / "models");
@@ -229,9 +231,9 @@ void Run(FigureOptions o) {
 
   // 2-3. Train each model, then its trials; results are rewritten after each row.
   std::vector<Row> rows;
-  for (PushingModelType type : types) {
-    const std::string name = PushingModelTypeName(type);
-    const PushingModel model = TrainModel(type, windows, o, dir / "models" / (name + ".json"));
+  for (LearnedKind type : types) {
+    const std::string name = LearnedKindName(type);
+    const LearnedModel model = TrainModel(type, windows, o, dir / "models" / (name + ".json"));
     rows.push_back(RunTrials(name, model, o.trials, o.samples, o.horizon, o));
     WriteResults(dir, rows);
   }

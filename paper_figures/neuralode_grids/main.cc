@@ -55,7 +55,7 @@ constexpr int kColumns = 14;
 // One training run of the sweep and, once done, its results.
 struct Run {
   std::string grid;  // accept, compare, single, multi
-  PushingModelConfig config;
+  LearnedModelConfig config;
   int horizon = 1;
   int epochs = 100;
   double lr = 1e-3;
@@ -77,13 +77,13 @@ std::string Key(const std::string& model, const std::string& solver, int steps, 
 }
 
 std::string Key(const Run& r) {
-  return Key(PushingModelTypeName(r.config.type), MethodName(r.config.method), r.config.steps,
+  return Key(LearnedKindName(r.config.type), MethodName(r.config.method), r.config.steps,
              r.config.hidden, r.lr, r.epochs, r.seed);
 }
 
 std::string ConfigName(const Run& r) {
   std::ostringstream s;
-  s << r.grid << " " << PushingModelTypeName(r.config.type) << " " << MethodName(r.config.method)
+  s << r.grid << " " << LearnedKindName(r.config.type) << " " << MethodName(r.config.method)
     << " steps " << r.config.steps << " h " << r.config.hidden << " lr " << r.lr << " epochs "
     << r.epochs << " seed " << r.seed;
   return s.str();
@@ -117,7 +117,7 @@ std::vector<Run> ReadDoneRows(const fs::path& path, const std::string& grid) {
     r.grid = grid;
     r.done = true;
     try {
-      r.config.type = ParsePushingModelType(f[0]);
+      r.config.type = ParseLearnedKind(f[0]);
       r.config.method = ParseMethod(f[1]);
       size_t used = 0;
       auto number_of = [&](const std::string& s) {
@@ -152,7 +152,7 @@ void WriteGrid(const fs::path& path, const std::vector<Run>& runs, const std::st
     f << kHeader << '\n';
     for (const Run& r : runs) {
       if (r.grid != grid || !r.done) continue;
-      f << PushingModelTypeName(r.config.type) << ',' << MethodName(r.config.method) << ','
+      f << LearnedKindName(r.config.type) << ',' << MethodName(r.config.method) << ','
         << r.config.steps << ',' << r.config.hidden << ',' << r.lr << ',' << r.epochs << ',' << r.seed
         << ',' << r.train_loss << ',' << r.val_loss << ',' << r.eval_single << ',' << r.eval_multi << ','
         << r.seconds << ',' << r.seconds_per_epoch << ',' << (r.diverged ? 1 : 0) << '\n';
@@ -230,14 +230,14 @@ int main(int argc, char** argv) {
     }
     const PushingWindows single = MakePushingWindows(trajectories, 1);
     const PushingWindows multi = MakePushingWindows(trajectories, 4);
-    const std::vector<PushingModelType> all_types{PushingModelType::kAbsNn, PushingModelType::kResNn,
-                                                  PushingModelType::kAbsNode, PushingModelType::kResNode};
+    const std::vector<LearnedKind> all_types{LearnedKind::kAbsNn, LearnedKind::kResNn,
+                                                  LearnedKind::kAbsNode, LearnedKind::kResNode};
     // The residual NeuralODE uses lr 1e-2 as in the paper's notebook (text: 1e-3).
-    auto default_lr = [](PushingModelType t) { return t == PushingModelType::kResNode ? 1e-2 : 1e-3; };
+    auto default_lr = [](LearnedKind t) { return t == LearnedKind::kResNode ? 1e-2 : 1e-3; };
 
     // The configurations, in priority order (which is also the CSV row order).
     std::vector<Run> runs;
-    auto add = [&](const std::string& grid, PushingModelType type, Method method, int steps, int hidden,
+    auto add = [&](const std::string& grid, LearnedKind type, Method method, int steps, int hidden,
                    int n_epochs, double lr, std::uint64_t s) {
       Run r;
       r.grid = grid;
@@ -255,10 +255,10 @@ int main(int argc, char** argv) {
       // The acceptance: `diffdyn train` defaults (rk4, 10 points, h 100,
       // 100 epochs), plus the NNs at the paper's 200 epochs.
       for (std::uint64_t s : seeds) {
-        for (PushingModelType type : all_types) {
+        for (LearnedKind type : all_types) {
           add("accept", type, Method::kRk4, 10, big, epochs, default_lr(type), s);
         }
-        for (PushingModelType type : {PushingModelType::kAbsNn, PushingModelType::kResNn}) {
+        for (LearnedKind type : {LearnedKind::kAbsNn, LearnedKind::kResNn}) {
           add("accept", type, Method::kRk4, 10, big, compare_epochs, 1e-3, s);
         }
       }
@@ -266,14 +266,14 @@ int main(int argc, char** argv) {
     if (has("compare")) {
       // The paper's final models: NNs lr 1e-3; NODEs dopri5, 10 grid points, h 100, 200 epochs.
       for (std::uint64_t s : seeds) {
-        for (PushingModelType type : all_types) {
+        for (LearnedKind type : all_types) {
           add("compare", type, Method::kDopri5, 10, big, compare_epochs, default_lr(type), s);
         }
       }
     }
     if (has("single")) {
       for (Method method : single_methods) {
-        for (PushingModelType type : {PushingModelType::kAbsNode, PushingModelType::kResNode}) {
+        for (LearnedKind type : {LearnedKind::kAbsNode, LearnedKind::kResNode}) {
           for (int steps : steps_single) {
             for (int hidden : hidden_single) add("single", type, method, steps, hidden, epochs, default_lr(type), seed);
           }
@@ -283,7 +283,7 @@ int main(int argc, char** argv) {
     if (has("multi")) {
       for (int steps : steps_multi) {
         for (int hidden : hidden_multi) {
-          add("multi", PushingModelType::kAbsNode, Method::kRk4, steps, hidden, epochs, 1e-3, seed);
+          add("multi", LearnedKind::kAbsNode, Method::kRk4, steps, hidden, epochs, 1e-3, seed);
         }
       }
     }
@@ -317,7 +317,7 @@ int main(int argc, char** argv) {
       Run r = runs[todo[c]];
       const auto start = std::chrono::steady_clock::now();
       try {
-        PushingModel model = PushingModel::Initialized(r.config, r.seed);
+        LearnedModel model = LearnedModel::Initialized(r.config, r.seed);
         TrainOptions options;
         options.epochs = r.epochs;
         options.learning_rate = r.lr;

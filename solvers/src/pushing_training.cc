@@ -112,7 +112,7 @@ struct Trainer::Chunk {
   Eigen::VectorXd grad;
   double loss = 0.0;
 
-  void Resize(const PushingModel& model, int horizon, int nb) {
+  void Resize(const LearnedModel& model, int horizon, int nb) {
     if (static_cast<int>(tapes.size()) != horizon) {
       tapes.clear();
       for (int k = 0; k < horizon; ++k) tapes.push_back(model.MakeWorkspace(nb));
@@ -130,9 +130,12 @@ struct Trainer::Chunk {
   }
 };
 
-Trainer::Trainer(PushingModel* model, const TrainOptions& options)
+Trainer::Trainer(LearnedModel* model, const TrainOptions& options)
     : model_(model), options_(options) {
   DIFFDYN_CHECK(model != nullptr, "Trainer needs a model");
+  DIFFDYN_CHECK(model->state_size() == 3 && model->action_size() == 3,
+                "Trainer: pushing windows need a model of 3 states and 3 actions, got ",
+                model->state_size(), " and ", model->action_size());
   DIFFDYN_CHECK(options.epochs >= 1, "--epochs must be >= 1, got ", options.epochs);
   DIFFDYN_CHECK(options.learning_rate > 0 && std::isfinite(options.learning_rate),
                 "--lr must be positive, got ", options.learning_rate);
@@ -154,7 +157,7 @@ double Trainer::BatchLossAndGradient(const PushingWindows& data, std::span<const
   const int chunks = NumChunks(n, options_.chunk_size);
   while (static_cast<int>(chunks_.size()) < chunks) chunks_.push_back(std::make_unique<Chunk>());
   const double scale = 1.0 / n;
-  const PushingModel& model = *model_;
+  const LearnedModel& model = *model_;
   ParallelForChunks(n, options_.chunk_size, options_.threads, [&](int c, int begin, int end) {
     Chunk& ch = *chunks_[c];
     const int nb = end - begin;

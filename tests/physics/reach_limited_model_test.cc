@@ -8,14 +8,14 @@
 #include <gtest/gtest.h>
 
 #include "diffdyn/autodiff_ode/random.h"
-#include "diffdyn/models/pushing_models.h"
+#include "diffdyn/models/learned_model.h"
 
 namespace diffdyn {
 namespace {
 
 TEST(ReachLimitedModel, KeepsThePoseExactlyWhereThePushIsUnreachable) {
-  const PushingModel model =
-      PushingModel::Initialized({.type = PushingModelType::kResNn, .hidden = 8}, 3);
+  const LearnedModel model =
+      LearnedModel::Initialized({.type = LearnedKind::kResNn, .hidden = 8}, 3);
   const PushReach reach{0.27, 0.8};
   const ReachLimitedModel limited(model, reach);
   EXPECT_EQ(limited.kind(), model.kind());

@@ -116,7 +116,7 @@ TEST(Se2PoseLoss, ValueAndGradientMatchDefinitionAndFiniteDifferences) {
 }
 
 struct GradientCase {
-  PushingModelType type;
+  LearnedKind type;
   Method method;
   int horizon;
 };
@@ -127,7 +127,7 @@ class TrainerGradient : public ::testing::TestWithParam<GradientCase> {};
 // NeuralODE's solver and the rollout, against central differences of the loss.
 TEST_P(TrainerGradient, BatchGradientMatchesFiniteDifferences) {
   const GradientCase c = GetParam();
-  PushingModelConfig config;
+  LearnedModelConfig config;
   config.type = c.type;
   config.method = c.method;
   config.hidden = 10;
@@ -135,10 +135,10 @@ TEST_P(TrainerGradient, BatchGradientMatchesFiniteDifferences) {
   // A smooth field: with ReLU a kink can sit within the difference step of some
   // sample (seen on the x86-64 baseline ISA: central differences with eps 1e-5
   // off by 1e-4, with eps 1e-7 equal to the adjoint to 1e-9), and dopri5 needs one
-  // (see pushing_models_test.cc). ReLU's own VJP is checked in tests/models.
+  // (see learned_model_test.cc). ReLU's own VJP is checked in tests/models.
   config.activation = Activation::Tanh();
   if (TableauOf(c.method).adaptive) config.tolerance = 1e-12;
-  PushingModel model = PushingModel::Initialized(config, 4);
+  LearnedModel model = LearnedModel::Initialized(config, 4);
   const PushingWindows data = MakePushingWindows(SyntheticTrajectories(4, 8, 3), c.horizon);
   std::vector<int> index(data.size());
   std::iota(index.begin(), index.end(), 0);
@@ -152,7 +152,7 @@ TEST_P(TrainerGradient, BatchGradientMatchesFiniteDifferences) {
   for (int k = 0; k < 3; ++k) {
     Eigen::VectorXd v(model.num_parameters());
     for (Eigen::Index i = 0; i < v.size(); ++i) v[i] = StandardNormal(rng);
-    PushingModel plus = model, minus = model;
+    LearnedModel plus = model, minus = model;
     plus.mutable_parameters() += eps * v;
     minus.mutable_parameters() -= eps * v;
     const double fd = (RolloutLoss(plus, data, 0.9, 1, 1000) - RolloutLoss(minus, data, 0.9, 1, 1000)) / (2 * eps);
@@ -163,15 +163,15 @@ TEST_P(TrainerGradient, BatchGradientMatchesFiniteDifferences) {
 
 INSTANTIATE_TEST_SUITE_P(
     Models, TrainerGradient,
-    ::testing::Values(GradientCase{PushingModelType::kAbsNode, Method::kRk4, 1},
-                      GradientCase{PushingModelType::kAbsNode, Method::kRk4, 4},
-                      GradientCase{PushingModelType::kResNode, Method::kDopri5, 1},
-                      GradientCase{PushingModelType::kResNode, Method::kDopri5, 4},
-                      GradientCase{PushingModelType::kResNn, Method::kRk4, 4}));
+    ::testing::Values(GradientCase{LearnedKind::kAbsNode, Method::kRk4, 1},
+                      GradientCase{LearnedKind::kAbsNode, Method::kRk4, 4},
+                      GradientCase{LearnedKind::kResNode, Method::kDopri5, 1},
+                      GradientCase{LearnedKind::kResNode, Method::kDopri5, 4},
+                      GradientCase{LearnedKind::kResNn, Method::kRk4, 4}));
 
-PushingModelConfig TinyNode() {
-  PushingModelConfig config;
-  config.type = PushingModelType::kResNode;
+LearnedModelConfig TinyNode() {
+  LearnedModelConfig config;
+  config.type = LearnedKind::kResNode;
   config.hidden = 16;
   config.steps = 3;
   return config;
@@ -180,7 +180,7 @@ PushingModelConfig TinyNode() {
 TEST(Trainer, SameBytesAtAnyThreadCountAndSeedMatters) {
   const PushingWindows data = MakePushingWindows(SyntheticTrajectories(30, 10, 5), 1);
   auto run = [&](int threads, std::uint64_t seed) {
-    PushingModel model = PushingModel::Initialized(TinyNode(), 1);
+    LearnedModel model = LearnedModel::Initialized(TinyNode(), 1);
     Trainer trainer(&model, {.epochs = 2, .batch_size = 64, .seed = seed, .threads = threads,
                              .chunk_size = 20, .progress = false});
     const TrainResult r = trainer.Train(data);
@@ -198,8 +198,8 @@ TEST(Trainer, SameBytesAtAnyThreadCountAndSeedMatters) {
 
 TEST(Trainer, LearnsASyntheticPushingLaw) {
   const PushingWindows data = MakePushingWindows(SyntheticTrajectories(60, 10, 6), 1);
-  PushingModel model = PushingModel::Initialized(
-      {.type = PushingModelType::kResNn, .hidden = 32}, 2);
+  LearnedModel model = LearnedModel::Initialized(
+      {.type = LearnedKind::kResNn, .hidden = 32}, 2);
   const double before = RolloutLoss(model, data, 1.0);
   Trainer trainer(&model, {.epochs = 60, .learning_rate = 3e-3, .batch_size = 100, .progress = false});
   std::vector<double> val;
@@ -215,7 +215,7 @@ TEST(Trainer, ReportsDivergenceAsNumericalError) {
   auto trajs = SyntheticTrajectories(10, 10, 7);
   trajs[3].states[4][1] = std::numeric_limits<double>::quiet_NaN();
   const PushingWindows data = MakePushingWindows(trajs, 1);
-  PushingModel model = PushingModel::Initialized({.type = PushingModelType::kAbsNn, .hidden = 8}, 3);
+  LearnedModel model = LearnedModel::Initialized({.type = LearnedKind::kAbsNn, .hidden = 8}, 3);
   Trainer trainer(&model, {.epochs = 2, .batch_size = 1000, .val_fraction = 0.0, .progress = false});
   try {
     trainer.Train(data);
@@ -229,7 +229,7 @@ TEST(Trainer, ReportsDivergenceAsNumericalError) {
 
 TEST(EvaluatePushingModel, MetricsFollowTheirDefinitions) {
   const auto trajs = SyntheticTrajectories(5, 10, 8);
-  const PushingModel model = PushingModel::Initialized({.type = PushingModelType::kAbsNn, .hidden = 8}, 4);
+  const LearnedModel model = LearnedModel::Initialized({.type = LearnedKind::kAbsNn, .hidden = 8}, 4);
   const PushingEvaluation e = EvaluatePushingModel(model, trajs, 2);
   EXPECT_EQ(e.n_samples, 50);
   EXPECT_EQ(e.n_windows, 35);
@@ -237,7 +237,7 @@ TEST(EvaluatePushingModel, MetricsFollowTheirDefinitions) {
   double single = 0.0;
   for (const auto& t : trajs) {
     for (size_t s = 0; s < t.actions.size(); ++s) {
-      const Eigen::Vector3d p = model.Predict<double>(t.states[s], t.actions[s]);
+      const Eigen::Vector3d p = model.Predict(t.states[s], t.actions[s]);
       single += Se2PoseLoss(p, t.states[s + 1], 1.0 / 50, nullptr);
     }
   }

@@ -9,8 +9,9 @@
 //     "architecture": { ... },             // kind-specific, see below for "mlp"
 //     "parameters": {"count": P, "values": [theta_0, ..., theta_{P-1}]},
 //     "provenance": { ... },               // who made it, from what data, seed, ...
-//     "metrics": { ... }                   // losses and errors measured on it
-//   }
+//     "metrics": { ... },                  // losses and errors measured on it
+//     "system": { ... }                    // optional: the states and actions
+//   }                                      // (system_description.h)
 //
 // Parameters are the model's ONE flat vector theta, written with the shortest
 // decimal form that reads back to the same double (bit-exact round trip).
@@ -48,6 +49,7 @@
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/io.h"
 #include "diffdyn/models/mlp.h"
+#include "diffdyn/models/system_description.h"
 
 namespace diffdyn {
 
@@ -66,6 +68,8 @@ struct ModelFile {
   nlohmann::json provenance = nlohmann::json::object();
   /// Measured errors and losses.
   nlohmann::json metrics = nlohmann::json::object();
+  /// The system's description (SystemToJson), or null where the kind has none.
+  nlohmann::json system = nullptr;
 };
 
 /// Checks a kind's architecture object and returns its parameter count; throws
@@ -169,6 +173,14 @@ inline ModelFile ModelFileFromJson(const nlohmann::json& j, const std::string& n
   file.architecture = j["architecture"];
   file.provenance = j["provenance"];
   file.metrics = j["metrics"];
+  if (j.contains("system")) {
+    try {
+      SystemFromJson(j["system"]);
+    } catch (const Error& e) {
+      fail(e.what());
+    }
+    file.system = j["system"];
+  }
   // Parameters: count, then every value a finite number.
   const nlohmann::json& p = j["parameters"];
   if (!p.contains("count") || !p["count"].is_number_integer() || p["count"].get<long long>() < 0) {
@@ -217,6 +229,7 @@ inline nlohmann::json ModelFileToJson(const ModelFile& file, const std::string& 
                       {"parameters", {{"count", file.parameters.size()}, {"values", values}}},
                       {"provenance", file.provenance.is_null() ? nlohmann::json::object() : file.provenance},
                       {"metrics", file.metrics.is_null() ? nlohmann::json::object() : file.metrics}};
+  if (!file.system.is_null()) j["system"] = file.system;
   ModelFileFromJson(j, name);  // the same checks as loading
   return j;
 }

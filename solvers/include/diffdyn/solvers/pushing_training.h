@@ -16,7 +16,7 @@
 // Gradients. A rollout is run forward with a tape per step; backward, step k gets
 // dL/dx^_{k+1} = gamma^k dSE2_k/dx^_{k+1} + (dL/dx^_{k+1} from step k+1) and returns
 // dL/dx^_k and adds dL/dtheta: reverse mode through the rollout and through the ODE
-// solver (discrete adjoint, pushing_models.h).
+// solver (discrete adjoint, learned_model.h).
 //
 // Trainer (the paper's loop): a seeded 80/20 split of the windows, Adam, mini-batches
 // (seeded shuffle each epoch, the last partial batch kept), the epoch's training loss
@@ -28,7 +28,7 @@
 // loss or gradient throws diffdyn::NumericalError naming the epoch and batch.
 //
 //   auto data = MakePushingWindows(ReadPushingCsv(path), 1);
-//   PushingModel model = PushingModel::Initialized(config, seed);
+//   LearnedModel model = LearnedModel::Initialized(config, seed);
 //   Trainer trainer(&model, {.epochs = 100, .seed = seed});
 //   TrainResult result = trainer.Train(data);
 #pragma once
@@ -42,7 +42,7 @@
 
 #include <Eigen/Core>
 
-#include "diffdyn/models/pushing_models.h"
+#include "diffdyn/models/learned_model.h"
 #include "diffdyn/models/transition_model.h"
 #include "diffdyn/physics/pushing_csv.h"
 
@@ -135,13 +135,13 @@ struct TrainResult {
   double final_val_loss = 0.0;
 };
 
-/// Trains a PushingModel in place with Adam on windows of any horizon (see the header
+/// Trains a LearnedModel in place with Adam on windows of any horizon (see the header
 /// comment). Keeps its buffers between batches: a batch allocates nothing once every
 /// chunk size has been seen.
 class Trainer {
  public:
   /// Trainer of *model (must outlive the trainer); throws diffdyn::Error for bad options.
-  Trainer(PushingModel* model, const TrainOptions& options);
+  Trainer(LearnedModel* model, const TrainOptions& options);
   ~Trainer();
   Trainer(const Trainer&) = delete;
   Trainer& operator=(const Trainer&) = delete;
@@ -157,7 +157,7 @@ class Trainer {
 
  private:
   struct Chunk;
-  PushingModel* model_;
+  LearnedModel* model_;
   TrainOptions options_;
   std::vector<std::unique_ptr<Chunk>> chunks_;
 };

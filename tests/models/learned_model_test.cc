@@ -1,6 +1,7 @@
-// The four pushing models: batched = training = templated paths, gradients of
-// single- and multi-step losses = central finite differences = Jets, model files.
-#include "diffdyn/models/pushing_models.h"
+// The four learned models on the pushing layout (3 states, 3 actions): batched =
+// training = templated paths, gradients of single- and multi-step losses = central
+// finite differences = Jets, model files.
+#include "diffdyn/models/learned_model.h"
 
 #include <filesystem>
 #include <fstream>
@@ -20,20 +21,20 @@ constexpr int kDirections = 3;
 using Jet = ceres::Jet<double, kDirections>;
 
 struct Case {
-  PushingModelType type;
+  LearnedKind type;
   Method method;
 };
 
 std::string CaseName(const ::testing::TestParamInfo<Case>& info) {
-  std::string name = PushingModelTypeName(info.param.type) + "_" + MethodName(info.param.method);
+  std::string name = LearnedKindName(info.param.type) + "_" + MethodName(info.param.method);
   for (char& c : name) {
     if (c == '-') c = '_';
   }
   return name;
 }
 
-PushingModelConfig SmallConfig(const Case& c) {
-  PushingModelConfig config;
+LearnedModelConfig SmallConfig(const Case& c) {
+  LearnedModelConfig config;
   config.type = c.type;
   config.method = c.method;
   config.hidden = 12;
@@ -73,8 +74,8 @@ Eigen::MatrixXd RandomMatrix(int rows, int cols, Rng& rng) {
 class PushingModelTest : public ::testing::TestWithParam<Case> {};
 
 TEST_P(PushingModelTest, BatchedForwardAndTemplatedPathsAgree) {
-  const PushingModelConfig config = SmallConfig(GetParam());
-  const PushingModel model = PushingModel::Initialized(config, 3);
+  const LearnedModelConfig config = SmallConfig(GetParam());
+  const LearnedModel model = LearnedModel::Initialized(config, 3);
   Rng rng(11);
   Eigen::MatrixXd states, actions;
   RandomBatch(9, rng, &states, &actions);
@@ -89,7 +90,7 @@ TEST_P(PushingModelTest, BatchedForwardAndTemplatedPathsAgree) {
   EXPECT_LT((predicted - taped).cwiseAbs().maxCoeff(), tol);
   for (int j = 0; j < 9; ++j) {
     const Eigen::Vector3d single =
-        model.Predict<double>(states.col(j), actions.col(j));
+        model.Predict(states.col(j), actions.col(j));
     for (int i = 0; i < 3; ++i) EXPECT_NEAR(predicted(i, j), single[i], tol) << i << "," << j;
   }
   // The prediction moved the state (the model is not trivially the identity or zero).
@@ -98,8 +99,8 @@ TEST_P(PushingModelTest, BatchedForwardAndTemplatedPathsAgree) {
 
 // L(theta, X) = <C, F(X, U)>: its gradients from Backward, central differences and Jets.
 TEST_P(PushingModelTest, SingleStepGradientsMatchFiniteDifferencesAndJets) {
-  const PushingModelConfig config = SmallConfig(GetParam());
-  PushingModel model = PushingModel::Initialized(config, 5);
+  const LearnedModelConfig config = SmallConfig(GetParam());
+  LearnedModel model = LearnedModel::Initialized(config, 5);
   Rng rng(12);
   const int b = 6;
   Eigen::MatrixXd states, actions;
@@ -113,7 +114,7 @@ TEST_P(PushingModelTest, SingleStepGradientsMatchFiniteDifferencesAndJets) {
   model.Backward(c, *ws, &grad, &dl_dx);
   ASSERT_GT(grad.norm(), 0.0);
 
-  auto loss = [&](const PushingModel& m) {
+  auto loss = [&](const LearnedModel& m) {
     Eigen::MatrixXd out(3, b);
     auto w = m.MakeWorkspace(b);
     m.PredictBatch(states, actions, out, *w);
@@ -129,13 +130,13 @@ TEST_P(PushingModelTest, SingleStepGradientsMatchFiniteDifferencesAndJets) {
   Jet jet_loss(0.0);
   for (int j = 0; j < b; ++j) {
     const Eigen::Vector3d x = states.col(j), u = actions.col(j);
-    const Eigen::Matrix<Jet, 3, 1> f = PredictPushing(jet_net, config, x, u);
+    const Eigen::Matrix<Jet, 3, 1> f = PredictLearned(jet_net, config, model.features(), x, u);
     for (int i = 0; i < 3; ++i) jet_loss += c(i, j) * f[i];
   }
   const double eps = 1e-5;
   for (int k = 0; k < kDirections; ++k) {
     const double adjoint = grad.dot(dirs[k]);
-    PushingModel plus = model, minus = model;
+    LearnedModel plus = model, minus = model;
     plus.mutable_parameters() += eps * dirs[k];
     minus.mutable_parameters() -= eps * dirs[k];
     const double fd = (loss(plus) - loss(minus)) / (2 * eps);
@@ -162,8 +163,8 @@ TEST_P(PushingModelTest, SingleStepGradientsMatchFiniteDifferencesAndJets) {
 // Four-step rollout x^_{k+1} = F(x^_k, u_k) with loss sum_k gamma^k <C_k, x^_{k+1}>:
 // chained Backward (through dL/dx) = central differences = Jets through the rollout.
 TEST_P(PushingModelTest, MultiStepRolloutGradientMatchesFiniteDifferencesAndJets) {
-  const PushingModelConfig config = SmallConfig(GetParam());
-  PushingModel model = PushingModel::Initialized(config, 8);
+  const LearnedModelConfig config = SmallConfig(GetParam());
+  LearnedModel model = LearnedModel::Initialized(config, 8);
   Rng rng(13);
   const int b = 4, horizon = 4;
   const double gamma = 0.9;
@@ -188,7 +189,7 @@ TEST_P(PushingModelTest, MultiStepRolloutGradientMatchesFiniteDifferencesAndJets
     model.Backward(g, *tapes[k], &grad, &dl_dx);
     carry = dl_dx;
   }
-  auto rollout_loss = [&](const PushingModel& m) {
+  auto rollout_loss = [&](const LearnedModel& m) {
     Eigen::MatrixXd x = x0, nx(3, b);
     auto w = m.MakeWorkspace(b);
     double l = 0.0;
@@ -212,14 +213,14 @@ TEST_P(PushingModelTest, MultiStepRolloutGradientMatchesFiniteDifferencesAndJets
     for (int k = 0; k < horizon; ++k) {
       Eigen::Matrix<Jet, 3, 1> u;
       for (int i = 0; i < 3; ++i) u[i] = Jet(actions[k](i, j));
-      x = PredictPushing(jet_net, config, x, u);
+      x = PredictLearned(jet_net, config, model.features(), x, u);
       for (int i = 0; i < 3; ++i) jet_loss += weights[k](i, j) * x[i];
     }
   }
   const double eps = 1e-5;
   for (int k = 0; k < kDirections; ++k) {
     const double adjoint = grad.dot(dirs[k]);
-    PushingModel plus = model, minus = model;
+    LearnedModel plus = model, minus = model;
     plus.mutable_parameters() += eps * dirs[k];
     minus.mutable_parameters() -= eps * dirs[k];
     const double fd = (rollout_loss(plus) - rollout_loss(minus)) / (2 * eps);
@@ -230,14 +231,14 @@ TEST_P(PushingModelTest, MultiStepRolloutGradientMatchesFiniteDifferencesAndJets
 }
 
 TEST_P(PushingModelTest, ModelFileRoundTripsBitExactly) {
-  const PushingModelConfig config = SmallConfig(GetParam());
-  const PushingModel model = PushingModel::Initialized(config, 21);
+  const LearnedModelConfig config = SmallConfig(GetParam());
+  const LearnedModel model = LearnedModel::Initialized(config, 21);
   const std::filesystem::path path =
       std::filesystem::temp_directory_path() /
-      ("diffdyn_pushing_" + PushingModelTypeName(config.type) + MethodName(config.method) + ".json");
-  SavePushingModel(path, model, {{"seed", 21}}, {{"val_loss", 1e-4}});
+      ("diffdyn_pushing_" + LearnedKindName(config.type) + MethodName(config.method) + ".json");
+  SaveLearnedModel(path, model, {{"seed", 21}}, {{"val_loss", 1e-4}});
   ModelFile contents;
-  const PushingModel back = LoadPushingModel(path, &contents);
+  const LearnedModel back = LoadLearnedModel(path, &contents);
   EXPECT_EQ(back.kind(), model.kind());
   EXPECT_EQ(back.config().method, config.method);
   EXPECT_EQ(back.config().steps, config.steps);
@@ -249,20 +250,20 @@ TEST_P(PushingModelTest, ModelFileRoundTripsBitExactly) {
 
 INSTANTIATE_TEST_SUITE_P(
     AllModels, PushingModelTest,
-    ::testing::Values(Case{PushingModelType::kAbsNn, Method::kRk4},
-                      Case{PushingModelType::kResNn, Method::kRk4},
-                      Case{PushingModelType::kAbsNode, Method::kRk4},
-                      Case{PushingModelType::kResNode, Method::kRk4},
-                      Case{PushingModelType::kAbsNode, Method::kDopri5},
-                      Case{PushingModelType::kResNode, Method::kDopri5},
-                      Case{PushingModelType::kAbsNode, Method::kEuler},
-                      Case{PushingModelType::kAbsNode, Method::kRk4Classic}),
+    ::testing::Values(Case{LearnedKind::kAbsNn, Method::kRk4},
+                      Case{LearnedKind::kResNn, Method::kRk4},
+                      Case{LearnedKind::kAbsNode, Method::kRk4},
+                      Case{LearnedKind::kResNode, Method::kRk4},
+                      Case{LearnedKind::kAbsNode, Method::kDopri5},
+                      Case{LearnedKind::kResNode, Method::kDopri5},
+                      Case{LearnedKind::kAbsNode, Method::kEuler},
+                      Case{LearnedKind::kAbsNode, Method::kRk4Classic}),
     CaseName);
 
-TEST(PushingModel, RejectsInconsistentModelFiles) {
-  const PushingModel model = PushingModel::Initialized({.type = PushingModelType::kResNode, .hidden = 8}, 1);
+TEST(LearnedModel, RejectsInconsistentModelFiles) {
+  const LearnedModel model = LearnedModel::Initialized({.type = LearnedKind::kResNode, .hidden = 8}, 1);
   const std::filesystem::path path = std::filesystem::temp_directory_path() / "diffdyn_bad_node.json";
-  SavePushingModel(path, model);
+  SaveLearnedModel(path, model);
   nlohmann::json j;
   std::ifstream(path) >> j;
   auto expect_rejected = [&](nlohmann::json bad, const std::string& fragment) {
@@ -271,7 +272,7 @@ TEST(PushingModel, RejectsInconsistentModelFiles) {
       out << bad.dump();
     }
     try {
-      LoadPushingModel(path);
+      LoadLearnedModel(path);
       FAIL() << "accepted a file with " << fragment;
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
@@ -293,14 +294,14 @@ TEST(PushingModel, RejectsInconsistentModelFiles) {
   std::filesystem::remove(path);
 }
 
-TEST(PushingModel, ParsesNamesAndRejectsUnknownOnes) {
-  EXPECT_EQ(ParsePushingModelType("res-node"), PushingModelType::kResNode);
-  EXPECT_TRUE(IsNeuralOde(PushingModelType::kAbsNode));
-  EXPECT_FALSE(IsResidual(PushingModelType::kAbsNn));
-  EXPECT_THROW(ParsePushingModelType("node"), Error);
+TEST(LearnedModel, ParsesNamesAndRejectsUnknownOnes) {
+  EXPECT_EQ(ParseLearnedKind("res-node"), LearnedKind::kResNode);
+  EXPECT_TRUE(IsNeuralOde(LearnedKind::kAbsNode));
+  EXPECT_FALSE(IsResidual(LearnedKind::kAbsNn));
+  EXPECT_THROW(ParseLearnedKind("node"), Error);
   // The paper's parameter counts: 11,103 (NN, h = 100) and 11,406 (NODE).
-  EXPECT_EQ(PushingModel::Initialized({.type = PushingModelType::kAbsNn}, 0).num_parameters(), 11103);
-  EXPECT_EQ(PushingModel::Initialized({.type = PushingModelType::kAbsNode}, 0).num_parameters(), 11406);
+  EXPECT_EQ(LearnedModel::Initialized({.type = LearnedKind::kAbsNn}, 0).num_parameters(), 11103);
+  EXPECT_EQ(LearnedModel::Initialized({.type = LearnedKind::kAbsNode}, 0).num_parameters(), 11406);
 }
 
 }  // namespace

@@ -1,0 +1,686 @@
+// The four learned transition models of the NeuralODE-Panda paper, for any system.
+//
+// State x (n components) and action u (m) are those of a SystemDescription
+// (system_description.h); pushing (x, y, theta; push location, angle, length) is
+// one system among others. Each model is x_{t+1} = F(x_t, u_t):
+//
+//   abs-nn     F = N(phi([x; u]))              N: MLP f-h-h-n
+//   res-nn     F = x + N(phi([x; u]))
+//   abs-node   F = P z(1)                      z(0) = [x; u] in R^(n+m),  dz/dt = M(phi(z)),
+//   res-node   F = x + P z(1)                  M: MLP f-h-h-(n+m),  P = [I_n 0]
+//
+// phi is the description's feature map: the identity, except that with
+// angle_features = sincos each angle component x_i becomes (sin x_i, cos x_i), so f =
+// n + m + (number of angles). The NeuralODE is autonomous and the action rides along
+// as ODE state; the ODE state stays the raw [x; u], only the network sees features.
+// z(1) comes from one Runge-Kutta method (butcher.h) on t in [0, 1]: a fixed-step
+// method takes steps - 1 equal steps h = 1 / (steps - 1) (`steps` grid points, as the
+// paper's torch.linspace(0, 1, steps)); dopri5 is adaptive with abs = rel tolerance
+// 1e-8 and integrates straight to t = 1 (torchdiffeq interpolates the grid; only
+// z(1) is used, so the grid does not matter). Outputs are not wrapped: losses
+// compare angle components on the circle.
+//
+// Three paths compute F:
+//
+// 1. PredictBatch (TransitionModel): B samples at once, samples in columns, as
+//    GEMMs through the MLP (BatchedOdeSolver for the NeuralODEs). For MPPI and eval.
+// 2. Forward / Backward (training): Forward records a tape in the workspace;
+//    Backward takes gbar = dL/dx_{t+1} (n x B) and returns
+//
+//      dL/dtheta += sum_b (dF/dtheta)^T gbar_b,      dL/dx_t = (dF/dx_t)^T gbar,
+//
+//    by the MLP's batched VJPs (and phi's); for the NeuralODEs through the discrete
+//    adjoint of the solver (adjoint.h), i.e. the exact gradient of the discrete map,
+//    with the adjoint seeded as dL/dz(1) = [gbar; 0]; the residual variants add gbar
+//    to dL/dx_t. dL/dx_t lets multi-step rollouts x^_{k+1} = F(x^_k, u_k) backpropagate.
+// 3. Predict and PredictLearned<P>: one sample on any scalar (double or ceres::Jet,
+//    in the state, the action, or the parameters via Mlp<P>), the NODE integrated by
+//    odeint (integrate.h) on Jet states. Tests pin 1 = 2 = 3.
+//
+// The batched paths never allocate once the workspace has seen the batch size.
+//
+//   LearnedModelConfig config{.type = LearnedKind::kAbsNode, .system = pendulum};
+//   LearnedModel model = LearnedModel::Initialized(config, 7);
+//   auto ws = model.MakeWorkspace(500);
+//   model.Forward(states, actions, next, *ws);               // n x B, m x B, n x B
+//   model.Backward(dl_dnext, *ws, &grad_theta, &dl_dstates);  // accumulates grad_theta
+#pragma once
+
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <numeric>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include "diffdyn/autodiff_ode/adjoint.h"
+#include "diffdyn/autodiff_ode/butcher.h"
+#include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/integrate.h"
+#include "diffdyn/models/init.h"
+#include "diffdyn/models/mlp.h"
+#include "diffdyn/models/model_file.h"
+#include "diffdyn/models/system_description.h"
+#include "diffdyn/models/transition_model.h"
+
+namespace diffdyn {
+
+/// The four model types; their command-line / model-file names are
+/// "abs-nn", "res-nn", "abs-node", "res-node".
+enum class LearnedKind { kAbsNn, kResNn, kAbsNode, kResNode };
+
+/// The name of `type` ("abs-nn", ...).
+inline std::string LearnedKindName(LearnedKind type) {
+  switch (type) {
+    case LearnedKind::kAbsNn: return "abs-nn";
+    case LearnedKind::kResNn: return "res-nn";
+    case LearnedKind::kAbsNode: return "abs-node";
+    case LearnedKind::kResNode: return "res-node";
+  }
+  return "abs-nn";
+}
+
+/// Parses "abs-nn", "res-nn", "abs-node" or "res-node"; throws diffdyn::Error
+/// naming `option` and the bad value otherwise.
+inline LearnedKind ParseLearnedKind(const std::string& name,
+                                              const std::string& option = "--model") {
+  for (LearnedKind t : {LearnedKind::kAbsNn, LearnedKind::kResNn,
+                             LearnedKind::kAbsNode, LearnedKind::kResNode}) {
+    if (name == LearnedKindName(t)) return t;
+  }
+  throw Error(StrCat(option, ": unknown model '", name,
+                     "' (expected abs-nn, res-nn, abs-node or res-node)"));
+}
+
+/// Whether `type` is a NeuralODE (abs-node, res-node).
+inline bool IsNeuralOde(LearnedKind type) {
+  return type == LearnedKind::kAbsNode || type == LearnedKind::kResNode;
+}
+
+/// Whether `type` adds x_t to the network output (res-nn, res-node).
+inline bool IsResidual(LearnedKind type) {
+  return type == LearnedKind::kResNn || type == LearnedKind::kResNode;
+}
+
+/// Everything that fixes a model's function apart from its parameters.
+struct LearnedModelConfig {
+  LearnedKind type = LearnedKind::kAbsNode;
+  /// h, the width of both hidden layers.
+  int hidden = 100;
+  /// NeuralODE solver (ignored by the NNs).
+  Method method = Method::kRk4;
+  /// NeuralODE grid points on [0, 1] (>= 2): steps - 1 fixed steps; dopri5's first trial step
+  /// is 1 / (steps - 1).
+  int steps = 10;
+  /// dopri5 absolute = relative tolerance.
+  double tolerance = 1e-8;
+  /// Hidden activation (the paper: ReLU). A smooth one (tanh) makes the NeuralODE's
+  /// flow smooth in theta, which adaptive solvers' error control assumes.
+  Activation activation = Activation::Relu();
+  /// The system: n, m and the angle features (default: 3 unnamed states and actions).
+  SystemDescription system = SystemDescription::Unnamed(3, 3);
+
+  /// Sizes (f, h, h, n) for the NNs, (f, h, h, n + m) for the NeuralODEs, f the
+  /// system's feature size; `activation` on both hidden layers.
+  MlpArchitecture Architecture() const {
+    const int n = system.state_size(), m = system.action_size();
+    const int out = IsNeuralOde(type) ? n + m : n;
+    return {{system.feature_size(), hidden, hidden, out}, {activation, activation}};
+  }
+
+  /// Throws diffdyn::Error naming the option for hidden < 1, steps < 2 or tolerance <= 0,
+  /// or for an invalid system.
+  void Validate() const {
+    system.Validate();
+    DIFFDYN_CHECK(hidden >= 1, "--hidden must be >= 1, got ", hidden);
+    DIFFDYN_CHECK(steps >= 2, "--steps must be >= 2 (grid points on [0, 1]), got ", steps);
+    DIFFDYN_CHECK(tolerance > 0 && std::isfinite(tolerance), "tolerance must be positive, got ",
+                  tolerance);
+  }
+
+  /// Solver options: dt = 1 / (steps - 1); for dopri5 also abs = rel = tolerance.
+  OdeOptions ode_options() const {
+    OdeOptions o;
+    o.method = method;
+    o.dt = 1.0 / (steps - 1);
+    o.abs_tol = tolerance;
+    o.rel_tol = tolerance;
+    return o;
+  }
+};
+
+/// phi([x; u]): a system's input features for learned models (see the file comment).
+/// Built once from the description; `identity()` when no angle is encoded.
+class FeatureMap {
+ public:
+  FeatureMap() = default;
+  explicit FeatureMap(const SystemDescription& system)
+      : inputs_(system.state_size() + system.action_size()), features_(system.feature_size()) {
+    if (!system.encodes_angles()) return;
+    for (int i = 0; i < inputs_; ++i) {
+      if (i < system.state_size() && system.is_angle(i)) angle_inputs_.push_back(i);
+    }
+  }
+
+  /// Whether phi is the identity.
+  bool identity() const { return angle_inputs_.empty(); }
+  /// f, the number of features.
+  int features() const { return features_; }
+
+  /// f = phi(z) for a batch: z (n + m) x B, f (f x B; resized).
+  void Apply(const Eigen::Ref<const Eigen::MatrixXd>& z, Eigen::MatrixXd& f) const {
+    f.resize(features_, z.cols());
+    int row = 0, next_angle = 0;
+    for (int i = 0; i < inputs_; ++i) {
+      if (next_angle < static_cast<int>(angle_inputs_.size()) && angle_inputs_[next_angle] == i) {
+        f.row(row++) = z.row(i).array().sin();
+        f.row(row++) = z.row(i).array().cos();
+        ++next_angle;
+      } else {
+        f.row(row++) = z.row(i);
+      }
+    }
+  }
+
+  /// g_z = (dphi/dz)^T g_f at z, per column: g_z (n + m) x B (resized), g_f f x B.
+  void Vjp(const Eigen::Ref<const Eigen::MatrixXd>& z, const Eigen::Ref<const Eigen::MatrixXd>& g_f,
+           Eigen::MatrixXd& g_z) const {
+    g_z.resize(inputs_, z.cols());
+    int row = 0, next_angle = 0;
+    for (int i = 0; i < inputs_; ++i) {
+      if (next_angle < static_cast<int>(angle_inputs_.size()) && angle_inputs_[next_angle] == i) {
+        g_z.row(i) = z.row(i).array().cos() * g_f.row(row).array() -
+                     z.row(i).array().sin() * g_f.row(row + 1).array();
+        row += 2;
+        ++next_angle;
+      } else {
+        g_z.row(i) = g_f.row(row++);
+      }
+    }
+  }
+
+  /// phi(z) for one sample on any scalar (Jets for derivatives).
+  template <typename T>
+  VectorX<T> operator()(const VectorX<T>& z) const {
+    using std::cos;
+    using std::sin;
+    if (identity()) return z;
+    VectorX<T> f(features_);
+    int row = 0, next_angle = 0;
+    for (int i = 0; i < inputs_; ++i) {
+      if (next_angle < static_cast<int>(angle_inputs_.size()) && angle_inputs_[next_angle] == i) {
+        f[row++] = sin(z[i]);
+        f[row++] = cos(z[i]);
+        ++next_angle;
+      } else {
+        f[row++] = z[i];
+      }
+    }
+    return f;
+  }
+
+ private:
+  int inputs_ = 0, features_ = 0;
+  std::vector<int> angle_inputs_;  // indices of z that are encoded angles, increasing
+};
+
+/// The MLP forward passes of one taped solve, kept so that the backward pass need not
+/// recompute them: entry k holds the input z and the MLP workspace (activations) of
+/// the k-th Eval since Start. At most 64 entries and `budget_bytes` of workspaces (an
+/// MLP workspace of B samples holds about 8 B (2 sum_l n_l + 2 w) bytes, w the widest
+/// layer: ~1.3 MB for h = 100, B = 250); later Evals are not kept and their Vjps
+/// recompute.
+struct MlpForwardCache {
+  std::vector<Eigen::MatrixXd> inputs;
+  std::vector<MlpWorkspace> workspaces;
+  int count = 0;
+  bool recording = false;
+  double budget_bytes = 192e6;
+
+  /// Entries that fit the budget for batches of `batch` samples of `arch`.
+  int Capacity(const MlpArchitecture& arch, int batch) const {
+    const double sum = std::accumulate(arch.sizes.begin(), arch.sizes.end(), 0.0);
+    const double bytes = 8.0 * batch * (2 * sum + 2.0 * arch.max_width());
+    return static_cast<int>(std::min(64.0, budget_bytes / std::max(bytes, 1.0)));
+  }
+
+  /// Forgets all entries; records the following Evals if `record`.
+  void Start(bool record) {
+    count = 0;
+    recording = record;
+  }
+};
+
+/// dz/dt = M(phi(z)) for a batch (n + m rows, one sample per column): the NeuralODE's
+/// vector field as a BatchedVjpSystem (adjoint.h). `net` and `features` point at the
+/// model's MLP and feature map and are re-pointed before every use (the model may
+/// have moved). With a `cache`,
+/// Evals of a taped solve keep their activations and the Vjp at the same stage input
+/// (the solver's backward pass visits stages in reverse order) reuses them instead of
+/// a second forward pass; a Vjp at an input not near the top of the cache recomputes.
+struct MlpOdeSystem {
+  const Mlp<double>* net = nullptr;
+  const FeatureMap* features = nullptr;
+  MlpForwardCache* cache = nullptr;
+
+  /// Buffers for one batch: the MLP's workspace plus input / output / gradient copies.
+  struct Workspace {
+    MlpWorkspace mlp;
+    Eigen::MatrixXd input, output, grad_input, grad_features;
+  };
+
+  /// n + m, the ODE state's size (the MLP's output size).
+  int state_size() const { return net->num_outputs(); }
+  /// p, the MLP's parameter count.
+  int num_params() const { return static_cast<int>(net->num_parameters()); }
+  /// Workspace for batches of `batch` samples (one MLP chunk per batch, no Jacobians).
+  Workspace MakeWorkspace(int batch) const {
+    Workspace ws;
+    ws.mlp = MlpWorkspace(net->architecture(), batch, std::max(batch, 1), /*jacobian=*/false);
+    return ws;
+  }
+  /// dzdt = M(phi(z)), z and dzdt (n + m) x B.
+  void Eval(const Eigen::Ref<const Eigen::MatrixXd>& z, double, Eigen::Ref<Eigen::MatrixXd> dzdt,
+            Workspace& ws) const {
+    const bool encoded = features != nullptr && !features->identity();
+    if (cache && cache->recording &&
+        cache->count < cache->Capacity(net->architecture(), static_cast<int>(z.cols()))) {
+      // Keep this forward pass for the backward one.
+      const int k = cache->count++;
+      if (static_cast<int>(cache->inputs.size()) <= k) {
+        cache->inputs.emplace_back();
+        cache->workspaces.emplace_back(net->architecture(), static_cast<int>(z.cols()),
+                                       std::max(static_cast<int>(z.cols()), 1), false);
+      }
+      if (encoded) {
+        features->Apply(z, cache->inputs[k]);
+      } else {
+        cache->inputs[k] = z;
+      }
+      net->Forward(cache->inputs[k], &ws.output, nullptr, &cache->workspaces[k]);
+      dzdt = ws.output;
+    } else if (encoded) {
+      // Not kept for a backward pass (a Vjp here recomputes): values only.
+      features->Apply(z, ws.input);
+      net->Evaluate(ws.input, dzdt, &ws.mlp);
+    } else {
+      net->Evaluate(z, dzdt, &ws.mlp);
+    }
+  }
+  /// vjp_z = (d M(phi(z)) / dz)^T lambda per column ((n + m) x B); grad_theta +=
+  /// sum_b (dM/dtheta)^T lambda_b. Reuses a cached forward pass at exactly this input
+  /// (searching down from the most recent entry and dropping the ones above it:
+  /// rejected or unneeded stages), else recomputes.
+  void Vjp(const Eigen::Ref<const Eigen::MatrixXd>& z, double,
+           const Eigen::Ref<const Eigen::MatrixXd>& lambda, Eigen::Ref<Eigen::MatrixXd> vjp_z,
+           Eigen::Ref<Eigen::VectorXd> grad_theta, Workspace& ws) const {
+    constexpr int kSearch = 8;
+    const bool encoded = features != nullptr && !features->identity();
+    if (encoded) features->Apply(z, ws.input);
+    const auto cached_at = [&](int k) {
+      const Eigen::MatrixXd& in = cache->inputs[k];
+      return in.cols() == z.cols() && (encoded ? in == ws.input : in == z);
+    };
+    MlpWorkspace* forward = nullptr;
+    if (cache) {
+      for (int k = cache->count - 1; k >= std::max(0, cache->count - kSearch); --k) {
+        if (cached_at(k)) {
+          forward = &cache->workspaces[k];
+          cache->count = k;
+          break;
+        }
+      }
+    }
+    if (forward == nullptr) {
+      if (!encoded) ws.input = z;
+      net->Forward(ws.input, &ws.output, nullptr, &ws.mlp);
+      forward = &ws.mlp;
+    }
+    // dL/dtheta goes straight into grad_theta (the sum over the solver's stages).
+    // The cotangent buffers of ws.mlp serve every cached stage (when wide enough).
+    const bool shared = forward != &ws.mlp && ws.mlp.chunk_size() >= forward->chunk_size();
+    net->BackwardAccumulate(lambda, grad_theta, &ws.grad_input, forward, 1,
+                            shared ? &ws.mlp : nullptr);
+    if (encoded) {
+      features->Vjp(z, ws.grad_input, ws.grad_features);
+      vjp_z = ws.grad_features;
+    } else {
+      vjp_z = ws.grad_input;
+    }
+  }
+};
+
+/// One-sample vector field for odeint on any scalar: dz/dt = M(phi(z)) with an Mlp<P>.
+template <typename P>
+struct MlpOdeFunction {
+  const Mlp<P>* net;
+  const FeatureMap* features;
+  template <typename T>
+  void operator()(const VectorX<T>& z, VectorX<T>& dzdt, double) const {
+    dzdt = (*net)((*features)(z));
+  }
+};
+
+/// F(x, u) of one sample on any scalars (the templated path): parameters of type P
+/// (an Mlp<P>, e.g. net.cast<Jet>() for parameter derivatives), state / action of
+/// type S; the result has the product scalar R. NeuralODEs are integrated by odeint
+/// (integrate.h) with config.ode_options(). x: n entries, u: m entries.
+template <typename P, typename DX, typename DU,
+          typename R = typename Mlp<P>::template ResultScalar<typename DX::Scalar>>
+VectorX<R> PredictLearned(const Mlp<P>& net, const LearnedModelConfig& config,
+                          const FeatureMap& features, const Eigen::MatrixBase<DX>& x,
+                          const Eigen::MatrixBase<DU>& u) {
+  const int n = config.system.state_size(), m = config.system.action_size();
+  DIFFDYN_CHECK(x.size() == n && u.size() == m, LearnedKindName(config.type), ": Predict got x of ",
+                x.size(), " and u of ", u.size(), " entries, expected ", n, " and ", m);
+  VectorX<R> z(n + m);
+  for (int i = 0; i < n; ++i) z[i] = R(x[i]);
+  for (int i = 0; i < m; ++i) z[n + i] = R(u[i]);
+  VectorX<R> out(n);
+  if (IsNeuralOde(config.type)) {
+    const MlpOdeFunction<P> f{&net, &features};
+    Integrate(f, z, 0.0, 1.0, config.ode_options());
+    out = z.head(n);
+  } else {
+    out = net(features(z));
+  }
+  if (IsResidual(config.type)) {
+    for (int i = 0; i < n; ++i) out[i] += R(x[i]);
+  }
+  return out;
+}
+
+/// Scratch and tape of one LearnedModel for batches up to a size, one per thread
+/// (and one per rollout step when training through rollouts).
+class LearnedWorkspace : public TransitionWorkspace {
+ public:
+  LearnedWorkspace() = default;
+  LearnedWorkspace(const LearnedWorkspace&) = delete;
+  LearnedWorkspace& operator=(const LearnedWorkspace&) = delete;
+
+ private:
+  friend class LearnedModel;
+  // NN: the MLP's tape; NODE: the solver (which references `system`) and its tape.
+  MlpWorkspace mlp;
+  MlpOdeSystem system;
+  MlpForwardCache cache;
+  std::unique_ptr<BatchedOdeSolver<MlpOdeSystem>> solver;
+  // input = [x; u]; features = phi(input) when angles are encoded (NN kinds).
+  Eigen::MatrixXd input, features, output, cotangent, grad_input, grad_z;
+  Eigen::VectorXd grad_params;
+  std::vector<double> times{0.0, 1.0};
+  std::vector<Eigen::MatrixXd> outputs, dl_dz;
+  int batch = 0;
+  bool taped = false;
+};
+
+/// One of the four learned models: config + MLP parameters (see the file comment).
+/// Immutable during prediction; training changes mutable_parameters() between calls.
+class LearnedModel final : public TransitionModel {
+ public:
+  /// A model with the given MLP, whose architecture must equal config.Architecture().
+  LearnedModel(const LearnedModelConfig& config, Mlp<double> net)
+      : config_(config), net_(std::move(net)), features_(config_.system) {
+    config_.Validate();
+    DIFFDYN_CHECK(net_.architecture() == config_.Architecture(), LearnedKindName(config.type),
+                  ": the network architecture does not match the configuration");
+  }
+
+  /// A model with PyTorch's default Linear initialisation drawn from Rng(seed).
+  static LearnedModel Initialized(const LearnedModelConfig& config, std::uint64_t seed) {
+    config.Validate();
+    return LearnedModel(config, MakeInitializedMlp(config.Architecture(), InitOptions{}, seed));
+  }
+
+  const LearnedModelConfig& config() const { return config_; }
+  const Mlp<double>& net() const { return net_; }
+  /// theta, the MLP's flat parameters (size num_parameters()).
+  const Eigen::VectorXd& parameters() const { return net_.parameters(); }
+  /// Mutable theta for optimisers (do not resize).
+  Eigen::VectorXd& mutable_parameters() { return net_.mutable_parameters(); }
+  Eigen::Index num_parameters() const { return net_.num_parameters(); }
+
+  /// The system the model predicts (sizes, names, angle features).
+  const SystemDescription& system() const { return config_.system; }
+  int state_size() const override { return config_.system.state_size(); }
+  int action_size() const override { return config_.system.action_size(); }
+  std::string kind() const override { return LearnedKindName(config_.type); }
+
+  std::unique_ptr<TransitionWorkspace> MakeWorkspace(int max_batch) const override {
+    auto ws = std::make_unique<LearnedWorkspace>();
+    Prepare(std::max(max_batch, 1), *ws);
+    return ws;
+  }
+
+  /// next = F(states, actions): n x B, m x B, n x B (no tape kept).
+  void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                    const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
+                    TransitionWorkspace& ws) const override {
+    CheckBatchSizes(states, actions, next);
+    Run(states, actions, next, Cast(ws), /*tape=*/false);
+  }
+
+  /// next = F(states, actions) (n x B, m x B, n x B), recording the tape for Backward in `ws`
+  /// (a workspace from MakeWorkspace). Throws diffdyn::NumericalError if the solver
+  /// fails (non-finite state, step-size underflow).
+  void Forward(const Eigen::Ref<const Eigen::MatrixXd>& states,
+               const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
+               TransitionWorkspace& ws) const {
+    CheckBatchSizes(states, actions, next);
+    Run(states, actions, next, Cast(ws), /*tape=*/true);
+  }
+
+  /// Reverse mode of the last Forward on `ws`: given dl_dnext = dL/dnext (n x B),
+  /// adds dL/dtheta to *grad_params (size num_parameters(); may be null) and writes
+  /// dL/dstates (n x B; resized; may be null).
+  void Backward(const Eigen::Ref<const Eigen::MatrixXd>& dl_dnext, TransitionWorkspace& ws_base,
+                Eigen::VectorXd* grad_params, Eigen::MatrixXd* dl_dstates) const {
+    LearnedWorkspace& ws = Cast(ws_base);
+    DIFFDYN_CHECK(ws.taped, kind(), ": Backward needs a Forward on the same workspace");
+    const int n = state_size();
+    DIFFDYN_CHECK(dl_dnext.rows() == n && dl_dnext.cols() == ws.batch, kind(),
+                  ": Backward got a ", dl_dnext.rows(), " x ", dl_dnext.cols(),
+                  " cotangent, expected ", n, " x ", ws.batch);
+    DIFFDYN_CHECK(grad_params == nullptr || grad_params->size() == num_parameters(), kind(),
+                  ": gradient vector has ", grad_params ? grad_params->size() : 0, " entries, expected ",
+                  num_parameters());
+    const int b = ws.batch;
+    if (IsNeuralOde(config_.type)) {
+      // Adjoint seed dL/dz(1) = [gbar; 0]; dL/dx_t = top rows of dL/dz(0).
+      ws.system.net = &net_;
+      ws.system.features = &features_;
+      ws.system.cache = &ws.cache;
+      Eigen::MatrixXd& seed = ws.dl_dz[1];
+      seed.topRows(n) = dl_dnext;
+      seed.bottomRows(action_size()).setZero();
+      ws.solver->BackwardDiscrete(ws.dl_dz, &ws.grad_input, &ws.grad_params);
+    } else {
+      static const Eigen::MatrixXd kNone;
+      ws.cotangent = dl_dnext;
+      net_.Backward(ws.cotangent, kNone, &ws.grad_params, &ws.grad_input, &ws.mlp);
+      // dL/d[x; u] from dL/dphi.
+      if (!features_.identity()) {
+        features_.Vjp(ws.input, ws.grad_input, ws.grad_z);
+        ws.grad_input.swap(ws.grad_z);
+      }
+    }
+    if (grad_params) *grad_params += ws.grad_params;
+    if (dl_dstates) {
+      if (dl_dstates->rows() != n || dl_dstates->cols() != b) dl_dstates->resize(n, b);
+      *dl_dstates = ws.grad_input.topRows(n);
+      if (IsResidual(config_.type)) *dl_dstates += dl_dnext;
+    }
+  }
+
+  /// F(x, u) for one sample (x: n, u: m entries) on any scalar (Jets for input
+  /// derivatives).
+  template <typename DX, typename DU>
+  VectorX<typename DX::Scalar> Predict(const Eigen::MatrixBase<DX>& x,
+                                       const Eigen::MatrixBase<DU>& u) const {
+    return PredictLearned(net_, config_, features_, x, u);
+  }
+
+  /// The feature map phi of the model's system.
+  const FeatureMap& features() const { return features_; }
+
+ private:
+  LearnedWorkspace& Cast(TransitionWorkspace& ws) const {
+    auto* p = dynamic_cast<LearnedWorkspace*>(&ws);
+    DIFFDYN_CHECK(p != nullptr, kind(), ": the workspace was not made by a LearnedModel");
+    return *p;
+  }
+
+  // Sizes the workspace buffers for a batch of b (allocates only when b changes).
+  void Prepare(int b, LearnedWorkspace& ws) const {
+    ws.system.net = &net_;
+    ws.system.features = &features_;
+    ws.system.cache = &ws.cache;
+    if (IsNeuralOde(config_.type)) {
+      if (!ws.solver) {
+        ws.solver = std::make_unique<BatchedOdeSolver<MlpOdeSystem>>(ws.system, config_.ode_options());
+      }
+    } else {
+      ws.mlp.Reserve(net_.architecture(), b, /*jacobian=*/false);
+    }
+    if (ws.batch == b) return;
+    ws.batch = b;
+    const int z = state_size() + action_size();
+    ws.input.resize(z, b);
+    ws.dl_dz.assign(2, Eigen::MatrixXd());
+    ws.dl_dz[1].resize(z, b);
+  }
+
+  void Run(const Eigen::Ref<const Eigen::MatrixXd>& states,
+           const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
+           LearnedWorkspace& ws, bool tape) const {
+    const int b = static_cast<int>(states.cols());
+    Prepare(b, ws);
+    const int n = state_size();
+    ws.input.topRows(n) = states;
+    ws.input.bottomRows(action_size()) = actions;
+    if (IsNeuralOde(config_.type)) {
+      ws.cache.Start(tape);
+      ws.solver->Forward(ws.input, ws.times, &ws.outputs, tape);
+      ws.cache.recording = false;
+      next = ws.outputs[1].topRows(n);
+    } else {
+      if (!features_.identity()) features_.Apply(ws.input, ws.features);
+      const Eigen::MatrixXd& input = features_.identity() ? ws.input : ws.features;
+      if (tape) {
+        net_.Forward(input, &ws.output, nullptr, &ws.mlp);
+        next = ws.output;
+      } else {
+        net_.Evaluate(input, next, &ws.mlp);
+      }
+    }
+    if (IsResidual(config_.type)) next += states;
+    ws.taped = tape;
+  }
+
+  LearnedModelConfig config_;
+  Mlp<double> net_;
+  FeatureMap features_;
+};
+
+// -----------------------------------------------------------------------------
+// Model files: kinds abs-nn, res-nn, abs-node, res-node.
+
+/// The "architecture" object of a learned model file:
+/// {"mlp": {sizes, activations}, "hidden": h, "solver": name, "steps": N, "tolerance": tol}.
+inline nlohmann::json LearnedArchitectureToJson(const LearnedModelConfig& config) {
+  return {{"mlp", MlpArchitectureToJson(config.Architecture())},
+          {"hidden", config.hidden},
+          {"solver", MethodName(config.method)},
+          {"steps", config.steps},
+          {"tolerance", config.tolerance}};
+}
+
+/// Inverse of LearnedArchitectureToJson for a file of `kind` whose system is
+/// `system`; throws diffdyn::Error (without the file name) for a missing or
+/// inconsistent field.
+inline LearnedModelConfig LearnedConfigFromJson(const std::string& kind, const nlohmann::json& j,
+                                                const SystemDescription& system) {
+  DIFFDYN_CHECK(j.is_object(), "architecture must be an object");
+  LearnedModelConfig config;
+  config.type = ParseLearnedKind(kind, "kind");
+  config.system = system;
+  auto field = [&](const char* key) -> const nlohmann::json& {
+    DIFFDYN_CHECK(j.contains(key), "architecture: missing '", key, "'");
+    return j[key];
+  };
+  DIFFDYN_CHECK(field("hidden").is_number_integer(), "architecture: 'hidden' must be an integer");
+  DIFFDYN_CHECK(field("solver").is_string(), "architecture: 'solver' must be a string");
+  DIFFDYN_CHECK(field("steps").is_number_integer(), "architecture: 'steps' must be an integer");
+  DIFFDYN_CHECK(field("tolerance").is_number(), "architecture: 'tolerance' must be a number");
+  config.hidden = j["hidden"].get<int>();
+  config.method = ParseMethod(j["solver"].get<std::string>(), "architecture: solver");
+  config.steps = j["steps"].get<int>();
+  config.tolerance = j["tolerance"].get<double>();
+  config.Validate();
+  const MlpArchitecture mlp = MlpArchitectureFromJson(field("mlp"));
+  if (!mlp.activations.empty()) config.activation = mlp.activations.front();
+  DIFFDYN_CHECK(mlp == config.Architecture(), "architecture: 'mlp' does not match a ", kind,
+                " with hidden ", config.hidden, " for ", system.state_size(), " states and ",
+                system.action_size(), " actions");
+  return config;
+}
+
+/// The system of a learned model file: its "system" object, or, in files written
+/// before systems were recorded, 3 unnamed states and 3 actions without encoded angles
+/// (the layout every such file has).
+inline SystemDescription LearnedFileSystem(const ModelFile& file) {
+  return file.system.is_null() ? SystemDescription::Unnamed(3, 3) : SystemFromJson(file.system);
+}
+
+/// Registers the four learned kinds with the model-file loader (idempotent). The
+/// parameter count follows from the architecture's "mlp"; LoadLearnedModel checks it
+/// against the system.
+inline void RegisterLearnedModelKinds() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    for (const char* kind : {"abs-nn", "res-nn", "abs-node", "res-node"}) {
+      RegisterModelKind(kind, [](const nlohmann::json& j) {
+        DIFFDYN_CHECK(j.is_object() && j.contains("mlp"), "architecture: missing 'mlp'");
+        return MlpArchitectureFromJson(j["mlp"]).num_parameters();
+      });
+    }
+  });
+}
+
+/// Saves `model` atomically to `path` with provenance and metrics objects.
+inline void SaveLearnedModel(const std::filesystem::path& path, const LearnedModel& model,
+                             const nlohmann::json& provenance = nlohmann::json::object(),
+                             const nlohmann::json& metrics = nlohmann::json::object()) {
+  RegisterLearnedModelKinds();
+  SaveModelFile(path, ModelFile{model.kind(), LearnedArchitectureToJson(model.config()),
+                                model.parameters(), provenance, metrics,
+                                SystemToJson(model.system())});
+}
+
+/// Loads a learned model file; throws diffdyn::Error with one line naming the path
+/// for a bad file or a kind that is not one of the four.
+inline LearnedModel LoadLearnedModel(const std::filesystem::path& path,
+                                     ModelFile* contents = nullptr) {
+  RegisterLearnedModelKinds();
+  ModelFile file = LoadModelFile(path);
+  const bool known = file.kind == "abs-nn" || file.kind == "res-nn" || file.kind == "abs-node" ||
+                     file.kind == "res-node";
+  DIFFDYN_CHECK(known, path.string(), ": model kind is '", file.kind,
+                "', expected abs-nn, res-nn, abs-node or res-node");
+  LearnedModelConfig config;
+  try {
+    config = LearnedConfigFromJson(file.kind, file.architecture, LearnedFileSystem(file));
+  } catch (const Error& e) {
+    throw Error(StrCat(path.string(), ": ", e.what()));
+  }
+  LearnedModel model(config, Mlp<double>(config.Architecture(), file.parameters));
+  if (contents) *contents = std::move(file);
+  return model;
+}
+
+}  // namespace diffdyn
