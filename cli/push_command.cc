@@ -24,17 +24,15 @@
 #include "command.h"
 #include "diffdyn/autodiff_ode/io.h"
 #include "diffdyn/autodiff_ode/progress.h"
-#include "diffdyn/models/learned_model.h"
-#include "diffdyn/physics/pushing_oracle.h"
+#include "diffdyn/solvers/load_model.h"
 #include "plot.h"
 
 namespace diffdyn::cli {
 
 std::unique_ptr<TransitionModel> LoadPushModel(const std::string& name, const PushingConfig& world) {
-  DIFFDYN_CHECK(!name.empty(), "--model: empty (a pushing model file or 'oracle')");
-  if (name == "oracle") return std::make_unique<PushingOracle>(world);
-  DIFFDYN_CHECK(std::filesystem::is_regular_file(name), "--model ", name, ": no such file");
-  auto model = std::make_unique<LearnedModel>(LoadLearnedModel(name));
+  LoadModelOptions options;
+  options.world = world;
+  auto model = LoadTransitionModel(name, options);
   DIFFDYN_CHECK(model->state_size() == 3 && model->action_size() == 3, "--model ", name,
                 ": a pushing model has 3 states and 3 actions, this one has ", model->state_size(),
                 " and ", model->action_size());

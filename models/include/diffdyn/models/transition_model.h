@@ -1,12 +1,14 @@
 // Transition models: x_{t+1} = F(x_t, u_t).
 //
-// A transition model maps a state x (n) and an action u (m) to the next state.
-// For the pushing task x = (x, y, theta) is the block's planar pose and
-// u = (push_location, push_angle, push_length); n = m = 3. The four learned
-// models of the NeuralODE-Panda paper (absolute / residual NN and NeuralODE),
-// extended physics models and the ODE-engine simulation itself (the "oracle")
-// all implement this one interface, so MPPI, evaluation and figures take any of
-// them.
+// A transition model maps a state x (n) and an action u (m) to the next state;
+// a SystemDescription (system_description.h) says what they are (for pushing,
+// x = (x, y, theta) is the block's planar pose and u = (push_location, push_angle,
+// push_length); for a robot arm, x = (q, qd) and u = tau). The four learned
+// models of the NeuralODE-Panda paper (learned_model.h), every continuous-time
+// system through one adapter (continuous_model.h: analytic robots, extended
+// physics models) and the ODE-engine simulation itself (the "oracle") all
+// implement this one interface, so MPPI, evaluation and figures take any of
+// them; LoadTransitionModel (solvers/load_model.h) opens each by name.
 //
 // The interface is the batched `double` path used by training, evaluation and
 // MPPI: B samples at once, one sample per column. Derivatives come from the
@@ -15,8 +17,8 @@
 // The model is immutable; scratch space lives in a workspace, one per thread:
 //
 //   auto ws = model.MakeWorkspace(/*max_batch=*/1000);
-//   Eigen::MatrixXd next(3, 1000);
-//   model.PredictBatch(states, actions, next, *ws);  // states, actions: 3 x 1000
+//   Eigen::MatrixXd next(n, 1000);
+//   model.PredictBatch(states, actions, next, *ws);  // states n x 1000, actions m x 1000
 #pragma once
 
 #include <memory>

@@ -42,6 +42,7 @@
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/jacobian.h"  // VectorX<T>
+#include "diffdyn/models/system_description.h"
 
 namespace diffdyn {
 
@@ -177,6 +178,49 @@ class AnalyticModelAdapter final : public AnalyticModel {
  private:
   std::vector<ParamSpec> specs_;
 };
+
+/// The manipulator equation of a compile-time analytic model (a struct as in
+/// simple_models.h) as continuous dynamics for ContinuousTransitionModel
+/// (continuous_model.h), on any scalar: x = (q, qd) (2n), u = tau (n), theta = p,
+///
+///   dx/dt = (qd, M(q)^{-1} (tau - ID(q, qd, 0))),   M(q) e_i = ID(q, 0, e_i) - ID(q, 0, 0).
+template <typename Model>
+struct AnalyticDynamics {
+  template <typename T>
+  void operator()(const VectorX<T>& x, const VectorX<T>& u, const VectorX<T>& theta, double,
+                  VectorX<T>& dxdt) const {
+    constexpr int n = Model::kDof;
+    const VectorX<T> q = x.head(n), qd = x.tail(n);
+    const VectorX<T> zero = VectorX<T>::Zero(n);
+    const VectorX<T> gravity = Model::template InverseDynamics<T>(q, zero, zero, theta);
+    MatrixX<T> mass(n, n);
+    for (int i = 0; i < n; ++i) {
+      VectorX<T> e = zero;
+      e[i] = T(1.0);
+      mass.col(i) = Model::template InverseDynamics<T>(q, zero, e, theta) - gravity;
+    }
+    const VectorX<T> bias = Model::template InverseDynamics<T>(q, qd, zero, theta);
+    dxdt.resize(2 * n);
+    dxdt.head(n) = qd;
+    dxdt.tail(n) = mass.llt().solve(u - bias);
+  }
+};
+
+/// The state (q1..qn, qd1..qdn) and action (tau1..taun) of an analytic model with n
+/// joints; revolute joints' q are angles, seen as sin/cos by learned models.
+inline SystemDescription AnalyticSystem(const AnalyticModel& model) {
+  SystemDescription s;
+  s.name = model.name();
+  const int n = model.dof();
+  for (int j = 1; j <= n; ++j) s.state_names.push_back(StrCat("q", j));
+  for (int j = 1; j <= n; ++j) s.state_names.push_back(StrCat("qd", j));
+  for (int j = 1; j <= n; ++j) s.action_names.push_back(StrCat("tau", j));
+  for (int j = 0; j < n; ++j) {
+    if (!model.prismatic(j)) s.angles.push_back(j);
+  }
+  s.angle_features = AngleFeatures::kSinCos;
+  return s;
+}
 
 /// p from the defaults overridden by `assignments` ("name=value", as given to
 /// --param; a 3-vector parameter `v` with entries v_x, v_y, v_z also accepts

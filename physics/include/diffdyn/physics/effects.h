@@ -300,4 +300,30 @@ class ExtendedModel {
   std::shared_ptr<const ResidualNetwork> residual_;
 };
 
+/// An extended model as continuous dynamics on double for ContinuousTransitionModel
+/// (models/continuous_model.h): x = (q, qd) (2n), u = tau_measured (n), no theta,
+///
+///   dx/dt = (qd, ExtendedModel::ForwardDynamics(q, qd, u)).
+///
+/// A delay effect needs the past torque, which (q, qd) does not hold: the constructor
+/// refuses a model with one.
+struct ExtendedDynamics {
+  explicit ExtendedDynamics(std::shared_ptr<const ExtendedModel> m) : model(std::move(m)) {
+    DIFFDYN_CHECK(model != nullptr, "ExtendedDynamics: no model");
+    for (const Effect& e : model->effects()) {
+      DIFFDYN_CHECK(e.kind != EffectKind::kDelay, model->model().name(),
+                    ": an extended model with a delay effect is not a transition model of (q, qd) "
+                    "(the delay needs the past torque)");
+    }
+  }
+  void operator()(const Eigen::VectorXd& x, const Eigen::VectorXd& u, const Eigen::VectorXd&,
+                  double, Eigen::VectorXd& dxdt) const {
+    const int n = model->dof();
+    dxdt.resize(2 * n);
+    dxdt.head(n) = x.tail(n);
+    dxdt.tail(n) = model->ForwardDynamics(x.head(n), x.tail(n), u);
+  }
+  std::shared_ptr<const ExtendedModel> model;
+};
+
 }  // namespace diffdyn

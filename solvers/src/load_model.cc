@@ -1,0 +1,65 @@
+#include "diffdyn/solvers/load_model.h"
+
+#include <filesystem>
+#include <utility>
+
+#include "diffdyn/models/learned_model.h"
+#include "diffdyn/models/model_file.h"
+#include "diffdyn/physics/effects.h"
+#include "diffdyn/physics/model_registry.h"
+#include "diffdyn/physics/pushing_oracle.h"
+#include "diffdyn/solvers/extended_model_file.h"
+
+namespace diffdyn {
+namespace {
+
+// An extended model (an analytic one without effects included) through the adapter.
+std::unique_ptr<TransitionModel> Continuous(std::shared_ptr<const ExtendedModel> model,
+                                           const std::string& spec, const std::string& kind,
+                                           const LoadModelOptions& options) {
+  DIFFDYN_CHECK(options.dt > 0, "--model ", spec, ": a continuous-time model (", kind,
+                ") needs a transition time step (--dt)");
+  SystemDescription system = AnalyticSystem(model->model());
+  try {
+    return std::make_unique<ContinuousTransitionModel<ExtendedDynamics>>(
+        ExtendedDynamics(std::move(model)), std::move(system), Eigen::VectorXd(),
+        ContinuousOptions{.method = options.method, .dt = options.dt, .substeps = options.substeps},
+        kind);
+  } catch (const Error& e) {
+    throw Error(StrCat("--model ", spec, ": ", e.what()));
+  }
+}
+
+}  // namespace
+
+std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
+                                                     const LoadModelOptions& options) {
+  DIFFDYN_CHECK(!spec.empty(), "--model: empty (a model file, an analytic model name or 'oracle')");
+  if (spec == "oracle") return std::make_unique<PushingOracle>(options.world);
+  for (const std::string& name : AnalyticModelNames()) {
+    if (spec != name) continue;
+    std::shared_ptr<const AnalyticModel> analytic = MakeAnalyticModel(name);
+    auto nominal = std::make_shared<const ExtendedModel>(analytic, analytic->DefaultParams(),
+                                                         std::vector<Effect>{});
+    return Continuous(std::move(nominal), spec, name, options);
+  }
+  DIFFDYN_CHECK(std::filesystem::is_regular_file(spec), "--model ", spec,
+                ": no such file, and not oracle or an analytic model (pendulum, cartpole, "
+                "double-pendulum, arm2, panda)");
+  RegisterLearnedModelKinds();
+  RegisterExtendedPhysicsKind();
+  const ModelFile file = LoadModelFile(spec);
+  if (file.kind == "extended-physics") {
+    auto extended = std::make_shared<const ExtendedModel>(LoadExtendedModel(spec));
+    return Continuous(std::move(extended), spec, file.kind, options);
+  }
+  if (file.kind == "abs-nn" || file.kind == "res-nn" || file.kind == "abs-node" ||
+      file.kind == "res-node") {
+    return std::make_unique<LearnedModel>(LoadLearnedModel(spec));
+  }
+  throw Error(StrCat("--model ", spec, ": a model of kind '", file.kind,
+                     "' is not a dynamics model (expected abs-nn, res-nn, abs-node, res-node or "
+                     "extended-physics)"));
+}
+
+}  // namespace diffdyn
