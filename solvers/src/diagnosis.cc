@@ -1132,21 +1132,10 @@ DiagnosisResult DiagnoseAtCutoff(std::shared_ptr<const AnalyticModel> model,
       };
       const double dt_median = (sd.t[std::min(count - 1, k0 + 1)] - sd.t[k0]);
       const int steps = std::max(10, static_cast<int>(std::ceil(options.rollout_horizon / std::max(1e-3, dt_median))));
-      const double h = options.rollout_horizon / steps;
       auto roll = [&](const ExtendedModel& m, double d) {
         Eigen::VectorXd q = sd.q.col(k0), v = sd.qd.col(k0);
-        auto f = [&](const Eigen::VectorXd& qq, const Eigen::VectorXd& vv, double time) {
-          return m.ForwardDynamics(qq, vv, tau_at(time - d));
-        };
-        for (int s = 0; s < steps; ++s) {
-          const double t = t0 + s * h;
-          const Eigen::VectorXd a1 = f(q, v, t);
-          const Eigen::VectorXd a2 = f(q + 0.5 * h * v, v + 0.5 * h * a1, t + 0.5 * h);
-          const Eigen::VectorXd a3 = f(q + 0.5 * h * (v + 0.5 * h * a1), v + 0.5 * h * a2, t + 0.5 * h);
-          const Eigen::VectorXd a4 = f(q + h * (v + 0.5 * h * a2), v + h * a3, t + h);
-          q += h * (v + h / 6.0 * (a1 + a2 + a3));
-          v += h / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4);
-        }
+        IntegrateJointMotion(m, [&](double time) { return tau_at(time - d); }, t0,
+                             t0 + options.rollout_horizon, steps, q, v);
         return std::make_pair(q, v);
       };
       Eigen::VectorXd q_end, v_end, unused;

@@ -162,7 +162,7 @@ HiddenEffectCase GenerateHiddenEffectCase(const std::string& model_name, std::ui
 
   // Closed-loop simulation: torque held per control period, fine RK4 inside.
   const double w = 2 * std::numbers::pi * 3.0;
-  const double dt_c = 1.0 / options.control_hz, h = dt_c / options.substeps;
+  const double dt_c = 1.0 / options.control_hz;
   const int control_steps = static_cast<int>(std::lround(options.duration * options.control_hz));
   const int record_every = static_cast<int>(std::lround(options.control_hz / options.sample_hz));
   std::vector<Eigen::VectorXd> commands;
@@ -200,20 +200,10 @@ HiddenEffectCase GenerateHiddenEffectCase(const std::string& model_name, std::ui
       const long idx = static_cast<long>(std::floor((s - delay) / dt_c + 1e-9));
       return commands[std::clamp<long>(idx, 0, static_cast<long>(commands.size()) - 1)];
     };
-    for (int s = 0; s < options.substeps; ++s) {
-      const double t0 = t + s * h;
-      auto f = [&](const Eigen::VectorXd& qq, const Eigen::VectorXd& vv, double time) {
-        return truth.ForwardDynamics(qq, vv, applied(time));
-      };
-      const Eigen::VectorXd a1 = f(q, qd, t0);
-      const Eigen::VectorXd a2 = f(q + 0.5 * h * qd, qd + 0.5 * h * a1, t0 + 0.5 * h);
-      const Eigen::VectorXd a3 = f(q + 0.5 * h * (qd + 0.5 * h * a1), qd + 0.5 * h * a2, t0 + 0.5 * h);
-      const Eigen::VectorXd a4 = f(q + h * (qd + 0.5 * h * a2), qd + h * a3, t0 + h);
-      q += h * (qd + h / 6.0 * (a1 + a2 + a3));
-      qd += h / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4);
-    }
-    if (!q.allFinite() || !qd.allFinite()) {
-      throw NumericalError(StrCat("hidden effects: simulation of ", data.path, " diverged"));
+    try {
+      IntegrateJointMotion(truth, applied, t, t + dt_c, options.substeps, q, qd);
+    } catch (const NumericalError& e) {
+      throw NumericalError(StrCat("hidden effects: simulation of ", data.path, " diverged: ", e.what()));
     }
   }
   data.t.conservativeResize(recorded);

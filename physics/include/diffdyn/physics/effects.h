@@ -35,6 +35,7 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/integrate.h"
 #include "diffdyn/physics/analytic_model.h"
 #include "diffdyn/physics/residual_network.h"
 
@@ -299,6 +300,29 @@ class ExtendedModel {
   std::vector<Effect> effects_;
   std::shared_ptr<const ResidualNetwork> residual_;
 };
+
+/// Joint motion of `model` driven by a time-varying torque: advances (q, qd) (n each,
+/// in place) from t0 to t1 under dx/dt = (qd, ForwardDynamics(q, qd, torque(t))), x =
+/// (q, qd), by `steps` steps of the project's rk4-classic (integrate.h). `torque` is a
+/// callable t -> the sensor torque (n) at t (interpolated, held or delayed by the
+/// caller). Throws diffdyn::NumericalError for a non-finite state or a mass matrix
+/// that is not positive definite.
+template <typename Torque>
+void IntegrateJointMotion(const ExtendedModel& model, const Torque& torque, double t0, double t1,
+                          int steps, Eigen::VectorXd& q, Eigen::VectorXd& qd) {
+  const int n = model.dof();
+  Eigen::VectorXd x(2 * n);
+  x.head(n) = q;
+  x.tail(n) = qd;
+  const auto system = [&](const Eigen::VectorXd& xx, Eigen::VectorXd& dxdt, double t) {
+    dxdt.resize(2 * n);
+    dxdt.head(n) = xx.tail(n);
+    dxdt.tail(n) = model.ForwardDynamics(xx.head(n), xx.tail(n), torque(t));
+  };
+  IntegrateFixedSteps(Method::kRk4Classic, system, x, t0, t1, steps);
+  q = x.head(n);
+  qd = x.tail(n);
+}
 
 /// An extended model as continuous dynamics on double for ContinuousTransitionModel
 /// (models/continuous_model.h): x = (q, qd) (2n), u = tau_measured (n), no theta,
