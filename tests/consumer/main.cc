@@ -1,8 +1,10 @@
 // Uses diffdyn's installed headers and libraries from another project: fixed-size
-// Eigen types and Jets cross the library boundary, compiled with or without
+// Eigen types, Jets and heap-allocated matrices cross the library boundary both ways
+// (made here and filled there, made there and freed here), compiled with or without
 // -march=native, and the answers must still be right.
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 
 #include <Eigen/Core>
 #include <ceres/jet.h>
@@ -10,6 +12,8 @@
 #include "diffdyn/autodiff_ode/parallel.h"
 #include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/physics/ode_engine.h"
+#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/solvers/load_model.h"
 #include "diffdyn/solvers/version.h"
 
 int main() {
@@ -29,6 +33,19 @@ int main() {
   for (double p : parts) sum += p;
   ok = ok && sum == 999.0 * 1000.0 / 2.0 && diffdyn::UniformUnit(rng) < 1.0;
   ok = ok && diffdyn::OdeEngine::IsDoublePrecision() && !diffdyn::Version().empty();
+
+  // Matrices allocated by the library and freed here, and the other way round.
+  const char* csv = "consumer_joint.csv";
+  std::ofstream(csv) << "t,q1,qd1,tau1\n0,0.1,0,0\n0.01,0.1,0,0\n0.02,0.1,0,0\n";
+  const diffdyn::JointData data = diffdyn::ReadJointCsv(csv);
+  ok = ok && data.size() == 3 && data.q(0, 2) == 0.1;
+  const auto pendulum = diffdyn::LoadTransitionModel("pendulum", {.dt = 0.01});
+  auto ws = pendulum->MakeWorkspace(2);
+  Eigen::MatrixXd states(2, 2), torques = Eigen::MatrixXd::Zero(1, 2), next(2, 2);
+  states << 0.0, 0.3, 0.0, 0.0;
+  pendulum->PredictBatch(states, torques, next, *ws);
+  // At rest at the bottom it stays; at q = 0.3 gravity pulls it back (qd < 0).
+  ok = ok && next.col(0).norm() == 0.0 && next(1, 1) < 0.0;
   std::printf("diffdyn %s consumer: %s\n", diffdyn::Version().c_str(), ok ? "ok" : "FAILED");
   return ok ? 0 : 1;
 }
