@@ -23,7 +23,9 @@
 #include <vector>
 
 #include "diffdyn/autodiff_ode/parallel.h"
-#include "diffdyn/solvers/pushing_training.h"
+#include "diffdyn/models/learned_model.h"
+#include "diffdyn/solvers/dataset_io.h"
+#include "diffdyn/solvers/training.h"
 #include "peak_dgemm.h"
 
 namespace diffdyn {
@@ -31,13 +33,13 @@ namespace {
 
 constexpr int kTransitions = 1000;
 
-const PushingWindows& Data() {
-  static const PushingWindows data = [] {
+const Windows& Data() {
+  static const Windows data = [] {
     // Run from the repository root (scripts/run-bench does), or name the file.
     const char* env = std::getenv("DIFFDYN_PUSHING_CSV");
     const std::string path =
         env ? env : "../shared/data/pybullet_pushing/collected_data.csv";
-    const auto all = MakePushingWindows(ReadPushingData(path), 1);
+    const auto all = MakeWindows(ReadDataset(path), 1);
     std::vector<int> first(kTransitions);
     std::iota(first.begin(), first.end(), 0);
     return SelectWindows(all, first);

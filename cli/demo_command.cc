@@ -30,7 +30,8 @@
 #include "diffdyn/physics/pushing_collect.h"
 #include "diffdyn/physics/pushing_csv.h"
 #include "diffdyn/physics/pushing_system.h"
-#include "diffdyn/solvers/pushing_training.h"
+#include "diffdyn/solvers/dataset_io.h"
+#include "diffdyn/solvers/training.h"
 #include "diffdyn/solvers/pushing_trials.h"
 #include "diffdyn/solvers/trajectory_fit.h"
 #include "plot.h"
@@ -215,7 +216,7 @@ void RunDemo(const DemoOptions& options) {
   config.steps = 10;
   config.hidden = 100;
   config.Validate();
-  const PushingWindows windows = MakePushingWindows(ReadPushingData(out / "pushes.csv"), 1);
+  const Windows windows = MakeWindows(ReadDataset((out / "pushes.csv").string()), 1);
   LearnedModel model = LearnedModel::Initialized(config, seed);
   TrainOptions train;
   train.epochs = options.epochs;

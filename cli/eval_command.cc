@@ -1,8 +1,18 @@
-// diffdyn eval: the paper's Fig. 5 metrics of a pushing model file on a pushing CSV:
-// the single-step SE(2) loss over every transition and the average 4-step loss
-// (sum of the four undiscounted rollout losses / 4) over every 4-step window.
-// --solver / --steps re-integrate a NeuralODE with another solver or grid than it was
-// trained with (same weights), to see how much of its loss the integration carries.
+// diffdyn eval: how well a dynamics model predicts a dataset.
+//
+//   diffdyn eval --model M --data D [--json]
+//
+// M is anything LoadTransitionModel opens (a learned or extended-physics model
+// file, an analytic model name, `oracle`); D any dataset (pushing CSV, joint-space
+// CSV, real-data folder). Reported, by the data's state metric (state_loss.h): the
+// single-step loss over every transition, the average 4-step loss (sum of the four
+// undiscounted rollout losses / 4) over every 4-step window, and the single-step
+// loss of the baseline "the state stays". Physics models integrate each transition
+// over its own interval (irregular logs); learned models predict their fixed one.
+// --solver / --steps re-integrate a NeuralODE with another solver or grid than it
+// was trained with (same weights); for continuous-time physics models --solver and
+// --substeps set the integration.
+#include <cmath>
 #include <memory>
 #include <string>
 
@@ -10,8 +20,9 @@
 
 #include "command.h"
 #include "diffdyn/models/learned_model.h"
-#include "diffdyn/physics/pushing_csv.h"
-#include "diffdyn/solvers/pushing_training.h"
+#include "diffdyn/solvers/dataset_io.h"
+#include "diffdyn/solvers/load_model.h"
+#include "diffdyn/solvers/training.h"
 
 namespace diffdyn::cli {
 namespace {
@@ -22,66 +33,100 @@ struct EvalCommandOptions {
   std::string data;
   std::string solver;
   int steps = 0;
+  int substeps = 4;
   bool solver_given = false;  // else the model's own solver
   bool steps_given = false;   // else the model's own grid
   int threads = 0;
 };
 
-// The model file's network with the solver and grid of the options where given.
-LearnedModel LoadWithSolver(const EvalCommandOptions& o) {
+// The model file's network with the solver and grid of the options.
+std::unique_ptr<TransitionModel> LoadNeuralOdeWithSolver(const EvalCommandOptions& o) {
   const LearnedModel model = LoadLearnedModel(o.model);
-  if (!o.solver_given && !o.steps_given) return model;
-  DIFFDYN_CHECK(IsNeuralOde(model.config().type), o.solver_given ? "--solver" : "--steps",
-                ": applies to NeuralODE models only; the model in ", o.model, " is ", model.kind());
+  DIFFDYN_CHECK(IsNeuralOde(model.config().type), o.steps_given ? "--steps" : "--solver",
+                ": applies to NeuralODE and physics models; the model in ", o.model, " is ", model.kind());
   LearnedModelConfig config = model.config();
   if (o.solver_given) config.method = ParseMethod(o.solver);
   if (o.steps_given) config.steps = o.steps;
-  return LearnedModel(config, model.net());
+  config.Validate();
+  return std::make_unique<LearnedModel>(config, model.net());
 }
 
+// The model of --model, integrated as the options say.
+std::unique_ptr<TransitionModel> LoadModel(const EvalCommandOptions& o, double dt) {
+  LoadModelOptions load;
+  load.dt = dt;
+  load.substeps = o.substeps;
+  if (o.solver_given) load.method = ParseMethod(o.solver);
+  std::unique_ptr<TransitionModel> model = LoadTransitionModel(o.model, load);
+  const bool learned = dynamic_cast<const LearnedModel*>(model.get()) != nullptr;
+  if (learned && (o.solver_given || o.steps_given)) return LoadNeuralOdeWithSolver(o);
+  DIFFDYN_CHECK(!o.steps_given || learned, "--steps: applies to NeuralODE models only; ", o.model,
+                " is ", model->kind(), " (use --substeps)");
+  return model;
+}
+
+nlohmann::json Number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
+
 void RunEval(const EvalCommandOptions& o) {
-  const LearnedModel model = LoadWithSolver(o);
-  const auto trajectories = ReadPushingData(o.data);
-  const PushingEvaluation e = EvaluatePushingModel(model, trajectories, o.threads);
-  const bool ode = IsNeuralOde(model.config().type);
+  DIFFDYN_CHECK(o.substeps >= 1, "--substeps must be >= 1, got ", o.substeps);
+  const Dataset read = ReadDataset(o.data, JointLayout{.all_actuated = true});
+  const SampleIntervals dt = read.Intervals();
+  const std::unique_ptr<TransitionModel> model = LoadModel(o, dt.median);
+  const Dataset data = DatasetForModel(read, model->description(), "--model " + o.model);
+  const Evaluation e = EvaluateModel(*model, data, o.threads);
+  const auto* learned = dynamic_cast<const LearnedModel*>(model.get());
+  const bool ode = learned && IsNeuralOde(learned->config().type);
   if (o.common.json) {
     nlohmann::json summary = {{"n_samples", e.n_samples},
                               {"single_step_loss", e.single_step_loss},
-                              {"avg_multi_step_loss", e.avg_multi_step_loss},
+                              {"avg_multi_step_loss", Number(e.avg_multi_step_loss)},
+                              {"baseline_single_step_loss", e.baseline_single_step_loss},
                               {"n_windows", e.n_windows},
-                              {"model", model.kind()}};
+                              {"model", model->kind()},
+                              {"dt", dt.median},
+                              {"dt_jitter", dt.jitter()}};
     if (ode) {
-      summary["solver"] = MethodName(model.config().method);
-      summary["steps"] = model.config().steps;
+      summary["solver"] = MethodName(learned->config().method);
+      summary["steps"] = learned->config().steps;
     }
     PrintJson(summary);
-  } else {
-    const std::string integration =
-        ode ? fmt::format(" ({}, {} points)", MethodName(model.config().method), model.config().steps)
-            : "";
-    fmt::print("{}{} on {}: {} transitions, {} 4-step windows\n", model.kind(), integration, o.data,
-               e.n_samples, e.n_windows);
-    fmt::print("single-step loss {:.4e}, average multi-step loss {:.4e}\n", e.single_step_loss,
-               e.avg_multi_step_loss);
+    return;
   }
+  const std::string integration =
+      ode ? fmt::format(" ({}, {} points)", MethodName(learned->config().method), learned->config().steps)
+          : "";
+  fmt::print("{}{} on {} ({}): {} transitions, {} 4-step windows\n", model->kind(), integration,
+             o.data, data.system.name, e.n_samples, e.n_windows);
+  if (dt.jitter() > 1e-6) {
+    fmt::print("irregular sampling: dt from {:.4g} to {:.4g} s (median {:.4g} s)\n", dt.min, dt.max,
+               dt.median);
+  }
+  fmt::print("single-step loss {:.4e} (baseline 'state stays' {:.4e}), average multi-step loss {:.4e}\n",
+             e.single_step_loss, e.baseline_single_step_loss, e.avg_multi_step_loss);
 }
 
 }  // namespace
 
 void RegisterEvalCommand(CLI::App& app) {
   auto* command = app.add_subcommand(
-      "eval", "Single-step and average multi-step SE(2) loss of a pushing model on a CSV");
+      "eval", "Single-step, average multi-step and baseline loss of any dynamics model on a dataset");
   auto o = std::make_shared<EvalCommandOptions>();
   AddCommonOptions(command, o->common);
-  command->add_option("--model", o->model, "Model file (abs-nn, res-nn, abs-node, res-node)")
+  command->add_option("--model", o->model,
+                      "Model file (learned or extended-physics), an analytic model (pendulum, "
+                      "cartpole, double-pendulum, arm2, panda) or oracle")
       ->required();
-  command->add_option("--data", o->data, "Pushing CSV")->required();
+  command->add_option("--data", o->data,
+                      "Dataset: a pushing CSV, a joint-space CSV or a real-data folder")
+      ->required();
   const CLI::Option* solver = command->add_option("--solver", o->solver,
-                      "NeuralODE only: integrate with this solver instead of the model's (rk4, "
-                      "rk4-classic, euler, midpoint, dopri5)");
+                      "Integrate a NeuralODE or physics model with this solver instead of its own "
+                      "(rk4, rk4-classic, euler, midpoint; dopri5 for NeuralODEs)");
   const CLI::Option* steps = command->add_option("--steps", o->steps,
                       "NeuralODE only: grid points on [0, 1] instead of the model's (>= 2)")
                           ->default_str("");
+  command->add_option("--substeps", o->substeps, "Physics models: solver steps per transition")
+      ->capture_default_str();
   command->add_option("--threads", o->threads, "Threads (0: all cores)");
   command->callback([o, solver, steps] {
     o->solver_given = solver->count() > 0;

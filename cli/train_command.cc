@@ -1,6 +1,10 @@
-// diffdyn train: fits one of the four pushing models (abs-nn, res-nn, abs-node,
-// res-node) to a pushing CSV with Adam, the single- or multi-step SE(2) loss and a
-// seeded train/validation split, then saves it as a model file.
+// diffdyn train: fits one of the four learned transition models (abs-nn, res-nn,
+// abs-node, res-node) to any dataset (a pushing CSV, a joint-space CSV, a real-data
+// folder) with Adam, the single- or multi-step loss of the data's state metric and
+// a seeded train/validation split, then saves it as a model file that records the
+// system description and the data's median sample interval.
+//
+//   diffdyn train --data pendulum.csv --model abs-node --epochs 200 --out pendulum.json
 #include <cmath>
 #include <memory>
 #include <string>
@@ -10,9 +14,9 @@
 #include "command.h"
 #include "diffdyn/autodiff_ode/butcher.h"
 #include "diffdyn/models/learned_model.h"
-#include "diffdyn/physics/pushing_csv.h"
-#include "diffdyn/physics/pushing_system.h"
-#include "diffdyn/solvers/pushing_training.h"
+#include "diffdyn/solvers/dataset_io.h"
+#include "diffdyn/solvers/training.h"
+#include "joint_layout_options.h"
 
 namespace diffdyn::cli {
 namespace {
@@ -31,6 +35,8 @@ struct TrainCommandOptions {
   double val_fraction = 0.2;
   double gamma = 0.9;
   int threads = 0;
+  int patience = 0;
+  JointLayoutOptions layout;
   std::string out = "model.json";
 };
 
@@ -38,9 +44,11 @@ struct TrainCommandOptions {
 nlohmann::json Number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
 
 void RunTrain(const TrainCommandOptions& o) {
+  const Dataset dataset = ReadDataset(o.data, ResolveJointLayout(o.layout));
+  const SampleIntervals dt = dataset.Intervals();
   LearnedModelConfig config;
   config.type = ParseLearnedKind(o.model);
-  config.system = PushingSystem();
+  config.system = dataset.system;
   config.method = ParseMethod(o.solver);
   config.steps = o.steps;
   config.hidden = o.hidden;
@@ -48,8 +56,7 @@ void RunTrain(const TrainCommandOptions& o) {
   DIFFDYN_CHECK(o.loss == "single" || o.loss == "multi", "--loss: unknown loss '", o.loss,
                 "' (expected single or multi)");
   const int horizon = o.loss == "multi" ? 4 : 1;
-  const auto trajectories = ReadPushingData(o.data);
-  const PushingWindows data = MakePushingWindows(trajectories, horizon);
+  const Windows data = MakeWindows(dataset, horizon);
 
   LearnedModel model = LearnedModel::Initialized(config, o.common.seed);
   TrainOptions options;
@@ -60,6 +67,7 @@ void RunTrain(const TrainCommandOptions& o) {
   options.gamma = o.gamma;
   options.seed = o.common.seed;
   options.threads = o.threads;
+  options.patience = o.patience;
   options.progress = !o.common.quiet;
   Trainer trainer(&model, options);
   const TrainResult result = trainer.Train(data);
@@ -68,7 +76,8 @@ void RunTrain(const TrainCommandOptions& o) {
       {"command", "diffdyn train"}, {"data", o.data},         {"seed", o.common.seed},
       {"loss", o.loss},             {"gamma", o.gamma},        {"epochs", o.epochs},
       {"lr", o.lr},                 {"batch", o.batch},        {"val_fraction", o.val_fraction},
-      {"n_train", result.n_train},  {"n_val", result.n_val}};
+      {"n_train", result.n_train},  {"n_val", result.n_val},    {"dt", dt.median},
+      {"dt_min", dt.min},           {"dt_max", dt.max},        {"epochs_run", result.epochs.size()}};
   const nlohmann::json metrics = {{"final_train_loss", Number(result.final_train_loss)},
                                   {"final_val_loss", Number(result.final_val_loss)},
                                   {"seconds_per_epoch", result.seconds_per_epoch}};
@@ -78,7 +87,11 @@ void RunTrain(const TrainCommandOptions& o) {
     PrintJson({{"model_path", o.out},
                {"n_train", result.n_train},
                {"n_val", result.n_val},
-               {"epochs", o.epochs},
+               {"epochs", static_cast<int>(result.epochs.size())},
+               {"stopped_early", result.stopped_early},
+               {"system", dataset.system.name},
+               {"dt", dt.median},
+               {"dt_jitter", dt.jitter()},
                {"seconds_per_epoch", result.seconds_per_epoch},
                {"final_train_loss", Number(result.final_train_loss)},
                {"final_val_loss", Number(result.final_val_loss)},
@@ -86,8 +99,17 @@ void RunTrain(const TrainCommandOptions& o) {
                {"loss", o.loss},
                {"parameters", model.num_parameters()}});
   } else {
-    fmt::print("{} ({} parameters) trained on {} {}-step samples, validated on {}\n", o.model,
-               model.num_parameters(), result.n_train, horizon, result.n_val);
+    fmt::print("{} ({} parameters, {} states, {} actions) trained on {} {}-step samples of {}, "
+               "validated on {}\n",
+               o.model, model.num_parameters(), model.state_size(), model.action_size(),
+               result.n_train, horizon, dataset.system.name, result.n_val);
+    if (dt.jitter() > 1e-6) {
+      fmt::print("irregular sampling: dt from {:.4g} to {:.4g} s (median {:.4g} s, which the "
+                 "model learns)\n", dt.min, dt.max, dt.median);
+    }
+    if (result.stopped_early) {
+      fmt::print("stopped early after {} epochs (--patience {})\n", result.epochs.size(), o.patience);
+    }
     fmt::print("final train loss {:.4e}, validation loss {:.4e}, {:.3f} s per epoch\n",
                result.final_train_loss, result.final_val_loss, result.seconds_per_epoch);
     fmt::print("saved {}\n", o.out);
@@ -98,10 +120,11 @@ void RunTrain(const TrainCommandOptions& o) {
 
 void RegisterTrainCommand(CLI::App& app) {
   auto* command = app.add_subcommand(
-      "train", "Train a block-pushing dynamics model (NN or NeuralODE) on a pushing CSV");
+      "train", "Train a learned dynamics model (NN or NeuralODE) on a pushing or joint-space dataset");
   auto o = std::make_shared<TrainCommandOptions>();
   AddCommonOptions(command, o->common);
-  command->add_option("--data", o->data, "Pushing CSV (trajectory,step,x,y,theta,push_*)")
+  command->add_option("--data", o->data,
+                      "Dataset: a pushing CSV, a joint-space CSV (t, q, qd, tau) or a real-data folder")
       ->required();
   command->add_option("--model", o->model, "Model: abs-nn, res-nn, abs-node or res-node");
   command->add_option("--solver", o->solver,
@@ -116,6 +139,9 @@ void RegisterTrainCommand(CLI::App& app) {
   command->add_option("--val-fraction", o->val_fraction, "Held-out fraction (seeded split)");
   command->add_option("--gamma", o->gamma, "Discount of the multi-step loss");
   command->add_option("--threads", o->threads, "Threads (0: all cores; results do not depend on it)");
+  command->add_option("--patience", o->patience,
+                      "Stop when the validation loss has not improved for this many epochs (0: never)");
+  AddJointLayoutOptions(command, o->layout);
   command->add_option("--out", o->out, "Model file to write");
   command->callback([o] { RunTrain(*o); });
 }

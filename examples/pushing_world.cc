@@ -127,8 +127,10 @@ int main(int argc, char** argv) {
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   int inside_obstacle = 0, off_table_unmarked = 0;
   for (const auto& t : data) {
-    for (const auto& s : t.states) inside_obstacle += PushingEnv::ObstaclePenetration(s) > 2e-3;
-    const auto& last = t.states.back();
+    for (Eigen::Index k = 0; k < t.states.cols(); ++k) {
+      inside_obstacle += PushingEnv::ObstaclePenetration(t.states.col(k)) > 2e-3;
+    }
+    const Eigen::Vector3d last = t.states.rightCols<1>();
     off_table_unmarked += !PushingEnv::OnTable(last.x(), last.y()) && t.status != "off_table";
   }
   fmt::print("{} pushes in {:.1f} s ({:.1f} pushes/s on {} threads)\n", stats.pushes, seconds,

@@ -35,7 +35,8 @@
 #include "diffdyn/physics/pushing_oracle.h"
 #include "diffdyn/physics/pushing_system.h"
 #include "diffdyn/solvers/pushing_trials.h"
-#include "diffdyn/solvers/pushing_training.h"
+#include "diffdyn/solvers/dataset_io.h"
+#include "diffdyn/solvers/training.h"
 #include "../figure_main.h"
 
 namespace diffdyn {
@@ -85,7 +86,7 @@ double LearningRate(LearnedKind type) {
   return type == LearnedKind::kResNode ? 1e-2 : 1e-3;
 }
 
-LearnedModel TrainModel(LearnedKind type, const PushingWindows& data, const FigureOptions& o,
+LearnedModel TrainModel(LearnedKind type, const Windows& data, const FigureOptions& o,
                         const fs::path& path) {
   LearnedModelConfig config;
   config.type = type;
@@ -226,8 +227,8 @@ void Run(FigureOptions o) {
     WritePushingCsvFile(data_path, data);
     if (!o.quiet) fmt::print("collected {} pushes in {} trajectories\n", stats.pushes, data.size());
   }
-  const PushingWindows windows =
-      types.empty() ? PushingWindows{} : MakePushingWindows(ReadPushingData(data_path), 1);
+  const Windows windows =
+      types.empty() ? Windows{} : MakeWindows(ReadDataset(data_path), 1);
 
   // 2-3. Train each model, then its trials; results are rewritten after each row.
   std::vector<Row> rows;

@@ -38,7 +38,9 @@
 #include "diffdyn/autodiff_ode/io.h"
 #include "diffdyn/autodiff_ode/parallel.h"
 #include "diffdyn/autodiff_ode/random.h"
-#include "diffdyn/solvers/pushing_training.h"
+#include "diffdyn/models/learned_model.h"
+#include "diffdyn/solvers/dataset_io.h"
+#include "diffdyn/solvers/training.h"
 #include "../figure_main.h"
 
 namespace fs = std::filesystem;
@@ -161,7 +163,7 @@ void WriteGrid(const fs::path& path, const std::vector<Run>& runs, const std::st
 }
 
 // The held-out windows of the trainer's seeded split (validation first in the shuffled order).
-PushingWindows HeldOut(const PushingWindows& data, std::uint64_t seed, double fraction) {
+Windows HeldOut(const Windows& data, std::uint64_t seed, double fraction) {
   std::vector<int> order(data.size());
   std::iota(order.begin(), order.end(), 0);
   Rng split(seed);
@@ -216,7 +218,8 @@ int main(int argc, char** argv) {
                     "' (expected rk4 or dopri5)");
       single_methods.push_back(name == "rk4" ? Method::kRk4 : Method::kDopri5);
     }
-    auto trajectories = ReadPushingData(data);
+    Dataset dataset = ReadDataset(data);
+    auto& trajectories = dataset.trajectories;
     std::vector<int> steps_single{2, 6, 10}, hidden_single{4, 32, 100};
     std::vector<int> steps_multi{2, 4, 6, 8, 10}, hidden_multi{4, 16, 32, 64, 100};
     int big = 100;
@@ -228,8 +231,8 @@ int main(int argc, char** argv) {
       seeds = {1};
       big = 8;
     }
-    const PushingWindows single = MakePushingWindows(trajectories, 1);
-    const PushingWindows multi = MakePushingWindows(trajectories, 4);
+    const Windows single = MakeWindows(dataset, 1);
+    const Windows multi = MakeWindows(dataset, 4);
     const std::vector<LearnedKind> all_types{LearnedKind::kAbsNn, LearnedKind::kResNn,
                                                   LearnedKind::kAbsNode, LearnedKind::kResNode};
     // The residual NeuralODE uses lr 1e-2 as in the paper's notebook (text: 1e-3).

@@ -33,14 +33,14 @@ Eigen::Vector3d SampleStartPose(StartDistribution starts, Rng& rng) {
   }
 }
 
-std::vector<PushingTrajectory> CollectPushingData(const CollectOptions& options,
+std::vector<Trajectory> CollectPushingData(const CollectOptions& options,
                                                   CollectStats* stats) {
   DIFFDYN_CHECK(options.trajectories >= 1, "--trajectories must be at least 1, got ",
                 options.trajectories);
   DIFFDYN_CHECK(options.length >= 1, "--length must be at least 1, got ", options.length);
   DIFFDYN_CHECK(options.threads >= 1, "--threads must be at least 1, got ", options.threads);
   const int n = options.trajectories;
-  std::vector<PushingTrajectory> data(n);
+  std::vector<Trajectory> data(n);
   std::vector<CollectStats> chunk_stats(NumChunks(n, kChunk));
   std::atomic<int> done{0};
   const auto caller = std::this_thread::get_id();
@@ -50,10 +50,11 @@ std::vector<PushingTrajectory> CollectPushingData(const CollectOptions& options,
     CollectStats& s = chunk_stats[chunk];
     for (int i = begin; i < end; ++i) {
       Rng rng = TrajectoryRng(options.seed, static_cast<std::uint64_t>(i));
-      PushingTrajectory& traj = data[i];
+      std::vector<Eigen::Vector3d> poses, actions;
+      std::string status = "ok";
       const Eigen::Vector3d start = SampleStartPose(options.starts, rng);
       env.Reset(start);
-      traj.states.push_back(env.pose());
+      poses.push_back(env.pose());
       for (int k = 0; k < options.length; ++k) {
         const Eigen::Vector3d action = SamplePushAction(rng);
         const PushResult r = env.Step(action);
@@ -71,18 +72,19 @@ std::vector<PushingTrajectory> CollectPushingData(const CollectOptions& options,
         s.tip_hit_obstacle += r.tip_hit_obstacle ? 1 : 0;
         s.block_hit_obstacle += r.block_hit_obstacle ? 1 : 0;
         if (r.status == PushStatus::kUnreachable) {
-          traj.status = PushStatusName(r.status);
+          status = PushStatusName(r.status);
           ++s.unreachable;
           break;
         }
-        traj.actions.push_back(action);
-        traj.states.push_back(r.pose);
+        actions.push_back(action);
+        poses.push_back(r.pose);
         if (r.status == PushStatus::kOffTable) {
-          traj.status = PushStatusName(r.status);
+          status = PushStatusName(r.status);
           ++s.off_table;
           break;
         }
       }
+      data[i] = MakePushingTrajectory(poses, actions, std::to_string(i), status);
       const int finished = ++done;
       if (options.progress && std::this_thread::get_id() == caller) options.progress(finished);
     }

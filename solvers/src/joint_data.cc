@@ -1,5 +1,6 @@
 #include "diffdyn/solvers/joint_data.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <filesystem>
@@ -15,6 +16,10 @@ namespace diffdyn {
 namespace {
 
 namespace fs = std::filesystem;
+
+// Ground-truth channels of the joint-space CSV: per joint (m1..mn, ...) and scalar.
+constexpr const char* kJointChannels[] = {"m", "c", "g", "f"};
+constexpr const char* kScalarChannels[] = {"kinetic", "potential"};
 
 // Splits a CSV line at commas, trimming spaces and a trailing carriage return.
 std::vector<std::string> SplitCsv(const std::string& line) {
@@ -201,6 +206,24 @@ JointData ReadJointCsv(const std::string& path) {
     DIFFDYN_CHECK(!has_qdd || column.count(StrCat("qdd", j)), path, ":1: no column 'qdd", j, "'");
   }
   DIFFDYN_CHECK(!column.count(StrCat("q", n + 2)), path, ":1: q columns are not contiguous");
+  // Ground-truth channels: per-joint components and scalar energies.
+  std::vector<std::pair<std::string, std::vector<int>>> channel_columns;
+  for (const char* prefix : kJointChannels) {
+    if (!column.count(StrCat(prefix, 1))) continue;
+    std::vector<int> cols(n);
+    for (int j = 0; j < n; ++j) {
+      DIFFDYN_CHECK(column.count(StrCat(prefix, j + 1)), path, ":1: no column '", prefix, j + 1,
+                    "' (", prefix, "1 is there)");
+      cols[j] = column[StrCat(prefix, j + 1)];
+    }
+    channel_columns.emplace_back(prefix, cols);
+  }
+  for (const char* name : kScalarChannels) {
+    if (column.count(name)) channel_columns.emplace_back(name, std::vector<int>{column[name]});
+  }
+  const int trajectory_column = column.count("trajectory") ? column["trajectory"] : -1;
+  std::vector<std::string> labels;
+  std::vector<std::vector<double>> channel_values(channel_columns.size());
   // Column indices of every field.
   std::vector<int> cq(n), cqd(n), cqdd(n), ctau(n);
   for (int j = 0; j < n; ++j) {
@@ -218,8 +241,24 @@ JointData ReadJointCsv(const std::string& path) {
                   " cells, the header has ", header.size());
     const std::string where = StrCat(path, ":", line_no);
     const double time = ParseNumber(cells[column["t"]], where);
-    // A time that goes back starts a new segment only if t restarts at its first value.
-    if (!t.empty() && time <= t.back()) {
+    if (trajectory_column >= 0) {
+      // A new label starts a new segment; inside one, time must increase.
+      const std::string& label = cells[trajectory_column];
+      DIFFDYN_CHECK(!label.empty(), where, ": empty trajectory label");
+      if (labels.empty()) {
+        labels.push_back(label);
+      } else if (label != labels.back()) {
+        DIFFDYN_CHECK(std::find(labels.begin(), labels.end(), label) == labels.end(), where,
+                      ": trajectory '", label.substr(0, 40), "' continues after another one");
+        labels.push_back(label);
+        starts.push_back(static_cast<int>(t.size()));
+      } else {
+        DIFFDYN_CHECK(time > t.back(), where, ": time does not increase (t = ", time, " after ",
+                      t.back(), ")");
+      }
+    } else if (!t.empty() && time <= t.back()) {
+      // Without labels, a time that goes back starts a new segment only if t restarts
+      // at its first value.
       DIFFDYN_CHECK(std::abs(time - t[starts.back()]) < 1e-12, where,
                     ": time does not increase (t = ", time, " after ", t.back(), ")");
       starts.push_back(static_cast<int>(t.size()));
@@ -230,6 +269,11 @@ JointData ReadJointCsv(const std::string& path) {
       tau.push_back(ParseNumber(cells[ctau[j]], where));
       if (has_qd) qd.push_back(ParseNumber(cells[cqd[j]], where));
       if (has_qdd) qdd.push_back(ParseNumber(cells[cqdd[j]], where));
+    }
+    for (std::size_t c = 0; c < channel_columns.size(); ++c) {
+      for (int col : channel_columns[c].second) {
+        channel_values[c].push_back(ParseNumber(cells[col], where));
+      }
     }
   }
   const int count = static_cast<int>(t.size());
@@ -242,6 +286,12 @@ JointData ReadJointCsv(const std::string& path) {
   data.tau = Eigen::Map<const Eigen::MatrixXd>(tau.data(), n, count);
   if (has_qdd) data.qdd = Eigen::Map<const Eigen::MatrixXd>(qdd.data(), n, count);
   data.segment_starts = starts;
+  data.segment_labels = labels;
+  for (std::size_t c = 0; c < channel_columns.size(); ++c) {
+    const int rows = static_cast<int>(channel_columns[c].second.size());
+    data.channels[channel_columns[c].first] =
+        Eigen::Map<const Eigen::MatrixXd>(channel_values[c].data(), rows, count);
+  }
   CheckTime(data);
   data.has_qd = has_qd;
   data.qd = has_qd ? Eigen::MatrixXd(Eigen::Map<const Eigen::MatrixXd>(qd.data(), n, count))
@@ -276,8 +326,10 @@ JointData ReadMeasured(const std::string& path) {
 void WriteJointCsv(const std::string& path, const JointData& data) {
   const int n = data.dof();
   const bool with_qdd = data.qdd.cols() == data.size() && data.qdd.rows() == n;
+  const bool with_labels = data.segment_starts.size() > 1 || !data.segment_labels.empty();
   WriteFileAtomically(path, [&](std::ostream& out) {
     out.precision(17);
+    if (with_labels) out << "trajectory,";
     out << "t";
     for (int j = 1; j <= n; ++j) out << ",q" << j;
     for (int j = 1; j <= n; ++j) out << ",qd" << j;
@@ -285,8 +337,22 @@ void WriteJointCsv(const std::string& path, const JointData& data) {
       for (int j = 1; j <= n; ++j) out << ",qdd" << j;
     }
     for (int j = 1; j <= n; ++j) out << ",tau" << j;
+    for (const auto& [name, values] : data.channels) {
+      if (values.rows() == 1) {
+        out << "," << name;
+      } else {
+        for (int j = 1; j <= values.rows(); ++j) out << "," << name << j;
+      }
+    }
     out << "\n";
+    std::size_t segment = 0;
     for (int k = 0; k < data.size(); ++k) {
+      while (segment + 1 < data.segment_starts.size() && k >= data.segment_starts[segment + 1]) ++segment;
+      if (with_labels) {
+        out << (segment < data.segment_labels.size() ? data.segment_labels[segment]
+                                                     : std::to_string(segment))
+            << ",";
+      }
       out << data.t[k];
       for (int j = 0; j < n; ++j) out << "," << data.q(j, k);
       for (int j = 0; j < n; ++j) out << "," << data.qd(j, k);
@@ -294,6 +360,9 @@ void WriteJointCsv(const std::string& path, const JointData& data) {
         for (int j = 0; j < n; ++j) out << "," << data.qdd(j, k);
       }
       for (int j = 0; j < n; ++j) out << "," << data.tau(j, k);
+      for (const auto& [name, values] : data.channels) {
+        for (int r = 0; r < values.rows(); ++r) out << "," << values(r, k);
+      }
       out << "\n";
     }
   });

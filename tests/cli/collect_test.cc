@@ -36,7 +36,7 @@ TEST(CollectCommand, JsonSummaryAndIdenticalBytesAtOneAndTwoThreads) {
 
   const auto data = diffdyn::ReadPushingCsv(one);
   ASSERT_EQ(data.size(), 3u);
-  for (const auto& t : data) EXPECT_EQ(t.states.size(), t.actions.size() + 1);
+  for (const auto& t : data) EXPECT_EQ(t.states.cols(), t.actions.cols() + 1);
 
   const auto r2 = RunDiffdyn("collect --threads 2" + common + two);
   ASSERT_EQ(r2.exit_code, 0) << r2.err;

@@ -31,13 +31,15 @@ std::string ErrorOf(const std::filesystem::path& path) {
 
 TEST(PushingCsv, RoundTripIsExact) {
   Rng rng(5);
-  std::vector<PushingTrajectory> data(3);
+  std::vector<Trajectory> data;
   for (int t = 0; t < 3; ++t) {
     const int n = t + 1;
+    std::vector<Eigen::Vector3d> poses, actions;
     for (int s = 0; s <= n; ++s) {
-      data[t].states.emplace_back(Uniform(rng, 0, 1), Uniform(rng, -1, 1), Uniform(rng, -3, 3));
-      if (s < n) data[t].actions.emplace_back(Uniform(rng, -1, 1), Uniform(rng, -1.5, 1.5), UniformUnit(rng));
+      poses.emplace_back(Uniform(rng, 0, 1), Uniform(rng, -1, 1), Uniform(rng, -3, 3));
+      if (s < n) actions.emplace_back(Uniform(rng, -1, 1), Uniform(rng, -1.5, 1.5), UniformUnit(rng));
     }
+    data.push_back(MakePushingTrajectory(poses, actions, std::to_string(t)));
   }
   data[2].status = "off_table";
   const auto path = std::filesystem::path(::testing::TempDir()) / "round_trip.csv";
@@ -46,10 +48,10 @@ TEST(PushingCsv, RoundTripIsExact) {
   ASSERT_EQ(back.size(), data.size());
   for (size_t t = 0; t < data.size(); ++t) {
     EXPECT_EQ(back[t].status, data[t].status);
-    ASSERT_EQ(back[t].states.size(), data[t].states.size());
-    ASSERT_EQ(back[t].actions.size(), data[t].actions.size());
-    for (size_t s = 0; s < data[t].states.size(); ++s) EXPECT_EQ(back[t].states[s], data[t].states[s]);
-    for (size_t s = 0; s < data[t].actions.size(); ++s) EXPECT_EQ(back[t].actions[s], data[t].actions[s]);
+    EXPECT_EQ(back[t].label, data[t].label);
+    EXPECT_EQ(back[t].t, data[t].t);
+    EXPECT_EQ(back[t].states, data[t].states);
+    EXPECT_EQ(back[t].actions, data[t].actions);
   }
   // Equal data, equal bytes.
   std::ostringstream a, b;
@@ -65,11 +67,11 @@ TEST(PushingCsv, ReadsWithoutStatusColumn) {
                               "1,0,0.5,0,0,,,\n");
   const auto data = ReadPushingCsv(path);
   ASSERT_EQ(data.size(), 2u);
-  EXPECT_EQ(data[0].states.size(), 2u);
-  EXPECT_EQ(data[0].actions.size(), 1u);
-  EXPECT_DOUBLE_EQ(data[0].actions[0].z(), 0.3);
+  EXPECT_EQ(data[0].states.cols(), 2);
+  EXPECT_EQ(data[0].transitions(), 1);
+  EXPECT_DOUBLE_EQ(data[0].actions(2, 0), 0.3);
   EXPECT_EQ(data[0].status, "ok");
-  EXPECT_EQ(data[1].actions.size(), 0u);
+  EXPECT_EQ(data[1].transitions(), 0);
 }
 
 TEST(PushingCsv, RaggedFilesNameFileAndLine) {
@@ -99,11 +101,12 @@ TEST(PushingCsv, ReadsTheSharedPybulletData) {
       ReadPushingCsv(std::filesystem::path(DIFFDYN_SHARED_DATA_DIR) / "pybullet_pushing/collected_data.csv");
   ASSERT_EQ(data.size(), 400u);
   for (const auto& t : data) {
-    ASSERT_EQ(t.states.size(), 11u);
-    ASSERT_EQ(t.actions.size(), 10u);
+    ASSERT_EQ(t.states.cols(), 11);
+    ASSERT_EQ(t.transitions(), 10);
+    t.Validate(3, 3, "pybullet");
   }
-  EXPECT_NEAR(data[0].states[0].x(), 0.4, 1e-6);
-  EXPECT_NEAR(data[0].states[0].z(), 0.2 * 3.14159265358979, 1e-6);
+  EXPECT_NEAR(data[0].states(0, 0), 0.4, 1e-6);
+  EXPECT_NEAR(data[0].states(2, 0), 0.2 * 3.14159265358979, 1e-6);
 }
 
 }  // namespace

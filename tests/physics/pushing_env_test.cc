@@ -52,7 +52,8 @@ TEST(PushingEnv, QuickCheckOfRandomPushes) {
   EXPECT_LT(stats.max_limit_violation, 1e-3); // joint limits kept
   EXPECT_LE(stats.max_tracking_error, 2e-3);  // pushes where the tip kept off the obstacle
   for (const auto& t : data) {
-    for (const auto& s : t.states) {
+    for (Eigen::Index k = 0; k < t.states.cols(); ++k) {
+      const Eigen::Vector3d s = t.states.col(k);
       EXPECT_LT(PushingEnv::ObstaclePenetration(s), 2e-3) << s.transpose();
       EXPECT_TRUE(s.allFinite());
       EXPECT_GT(s.z(), -kPi - 1e-12);

@@ -21,12 +21,12 @@ struct Push {
   double length, angle;
 };
 
-std::vector<Push> Pushes(const std::vector<PushingTrajectory>& data) {
+std::vector<Push> Pushes(const std::vector<Trajectory>& data) {
   std::vector<Push> pushes;
   for (const auto& t : data) {
-    for (size_t s = 0; s < t.actions.size(); ++s) {
-      const Eigen::Vector3d d = (t.states[s + 1] - t.states[s]).cwiseAbs();
-      pushes.push_back({{d.x(), d.y(), d.z()}, t.actions[s].z(), std::abs(t.actions[s].y())});
+    for (int s = 0; s < t.transitions(); ++s) {
+      const Eigen::Vector3d d = (t.states.col(s + 1) - t.states.col(s)).cwiseAbs();
+      pushes.push_back({{d.x(), d.y(), d.z()}, t.actions(2, s), std::abs(t.actions(1, s))});
     }
   }
   return pushes;

@@ -121,6 +121,7 @@ class ContinuousTransitionModel final : public TransitionModel {
   int state_size() const override { return system_.state_size(); }
   int action_size() const override { return system_.action_size(); }
   std::string kind() const override { return kind_; }
+  SystemDescription description() const override { return system_; }
 
   std::unique_ptr<TransitionWorkspace> MakeWorkspace(int /*max_batch*/) const override {
     auto ws = std::make_unique<ContinuousWorkspace>(options_.method);
@@ -133,24 +134,23 @@ class ContinuousTransitionModel final : public TransitionModel {
   /// diffdyn::NumericalError for a non-finite state.
   void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
                     const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
-                    TransitionWorkspace& ws_base) const override {
+                    TransitionWorkspace& ws) const override {
     CheckBatchSizes(states, actions, next);
-    auto* ws = dynamic_cast<ContinuousWorkspace*>(&ws_base);
-    DIFFDYN_CHECK(ws != nullptr, kind_, ": the workspace was not made by this model");
-    const BoundDynamics<Dynamics, double> system(f_, ws->u, theta_);
-    const double h = options_.dt / options_.substeps;
-    std::visit(
-        [&](auto& stepper) {
-          for (Eigen::Index b = 0; b < states.cols(); ++b) {
-            ws->x = states.col(b);
-            ws->u = actions.col(b);
-            for (int k = 0; k < options_.substeps; ++k) stepper.do_step(system, ws->x, k * h, h);
-            CheckFiniteState(ws->x, options_.dt);
-            next.col(b) = ws->x;
-          }
-        },
-        ws->stepper);
+    Integrate(states, actions, nullptr, next, ws);
   }
+
+  /// As PredictBatch, sample b integrated over its own dt(b) > 0 (substeps equal steps).
+  void PredictBatchOver(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                        const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                        const Eigen::Ref<const Eigen::RowVectorXd>& dt, Eigen::Ref<Eigen::MatrixXd> next,
+                        TransitionWorkspace& ws) const override {
+    CheckBatchSizes(states, actions, next);
+    DIFFDYN_CHECK(dt.size() == states.cols(), kind_, ": PredictBatchOver got ", dt.size(),
+                  " intervals for ", states.cols(), " samples");
+    Integrate(states, actions, &dt, next, ws);
+  }
+
+  bool uses_intervals() const override { return true; }
 
   /// F(x, u) for one sample (x: n, u: m entries) on any scalar (Jets for dF/dx, dF/du).
   template <typename DX, typename DU>
@@ -170,6 +170,31 @@ class ContinuousTransitionModel final : public TransitionModel {
   }
 
  private:
+  // Each column over options_.dt, or over (*dt)(b) when dt is given.
+  void Integrate(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                 const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                 const Eigen::Ref<const Eigen::RowVectorXd>* dt, Eigen::Ref<Eigen::MatrixXd> next,
+                 TransitionWorkspace& ws_base) const {
+    auto* ws = dynamic_cast<ContinuousWorkspace*>(&ws_base);
+    DIFFDYN_CHECK(ws != nullptr, kind_, ": the workspace was not made by this model");
+    const BoundDynamics<Dynamics, double> system(f_, ws->u, theta_);
+    std::visit(
+        [&](auto& stepper) {
+          for (Eigen::Index b = 0; b < states.cols(); ++b) {
+            const double interval = dt ? (*dt)(b) : options_.dt;
+            DIFFDYN_CHECK(interval > 0 && std::isfinite(interval), kind_,
+                          ": a transition needs a positive interval, got ", interval);
+            const double h = interval / options_.substeps;
+            ws->x = states.col(b);
+            ws->u = actions.col(b);
+            for (int k = 0; k < options_.substeps; ++k) stepper.do_step(system, ws->x, k * h, h);
+            CheckFiniteState(ws->x, interval);
+            next.col(b) = ws->x;
+          }
+        },
+        ws->stepper);
+  }
+
   Dynamics f_;
   SystemDescription system_;
   Eigen::VectorXd theta_;

@@ -421,7 +421,7 @@ class LearnedWorkspace : public TransitionWorkspace {
 
 /// One of the four learned models: config + MLP parameters (see the file comment).
 /// Immutable during prediction; training changes mutable_parameters() between calls.
-class LearnedModel final : public TransitionModel {
+class LearnedModel final : public DifferentiableTransitionModel {
  public:
   /// A model with the given MLP, whose architecture must equal config.Architecture().
   LearnedModel(const LearnedModelConfig& config, Mlp<double> net)
@@ -440,16 +440,17 @@ class LearnedModel final : public TransitionModel {
   const LearnedModelConfig& config() const { return config_; }
   const Mlp<double>& net() const { return net_; }
   /// theta, the MLP's flat parameters (size num_parameters()).
-  const Eigen::VectorXd& parameters() const { return net_.parameters(); }
+  const Eigen::VectorXd& parameters() const override { return net_.parameters(); }
   /// Mutable theta for optimisers (do not resize).
-  Eigen::VectorXd& mutable_parameters() { return net_.mutable_parameters(); }
-  Eigen::Index num_parameters() const { return net_.num_parameters(); }
+  Eigen::VectorXd& mutable_parameters() override { return net_.mutable_parameters(); }
+  Eigen::Index num_parameters() const override { return net_.num_parameters(); }
 
   /// The system the model predicts (sizes, names, angle features).
   const SystemDescription& system() const { return config_.system; }
   int state_size() const override { return config_.system.state_size(); }
   int action_size() const override { return config_.system.action_size(); }
   std::string kind() const override { return LearnedKindName(config_.type); }
+  SystemDescription description() const override { return config_.system; }
 
   std::unique_ptr<TransitionWorkspace> MakeWorkspace(int max_batch) const override {
     auto ws = std::make_unique<LearnedWorkspace>();
@@ -470,7 +471,7 @@ class LearnedModel final : public TransitionModel {
   /// fails (non-finite state, step-size underflow).
   void Forward(const Eigen::Ref<const Eigen::MatrixXd>& states,
                const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
-               TransitionWorkspace& ws) const {
+               TransitionWorkspace& ws) const override {
     CheckBatchSizes(states, actions, next);
     Run(states, actions, next, Cast(ws), /*tape=*/true);
   }
@@ -479,7 +480,7 @@ class LearnedModel final : public TransitionModel {
   /// adds dL/dtheta to *grad_params (size num_parameters(); may be null) and writes
   /// dL/dstates (n x B; resized; may be null).
   void Backward(const Eigen::Ref<const Eigen::MatrixXd>& dl_dnext, TransitionWorkspace& ws_base,
-                Eigen::VectorXd* grad_params, Eigen::MatrixXd* dl_dstates) const {
+                Eigen::VectorXd* grad_params, Eigen::MatrixXd* dl_dstates) const override {
     LearnedWorkspace& ws = Cast(ws_base);
     DIFFDYN_CHECK(ws.taped, kind(), ": Backward needs a Forward on the same workspace");
     const int n = state_size();

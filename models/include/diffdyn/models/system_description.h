@@ -6,7 +6,9 @@
 // (differences wrapped to (-pi, pi]) and, when `angle_features` is kSinCos, a
 // learned model sees them as the pair (sin x_i, cos x_i) instead of x_i, so that
 // its prediction is periodic in the angle. Actions may be bounded (empty bounds:
-// unbounded). Generic code reads these fields and never the name.
+// unbounded). The state metric weighs the squared error of each component
+// (loss_weights, default 1) and wraps angle differences unless the system says
+// otherwise (state_loss.h). Generic code reads these fields and never the name.
 //
 //   SystemDescription pendulum{.name = "pendulum", .state_names = {"q1", "qd1"},
 //                              .action_names = {"tau1"}, .angles = {0},
@@ -47,6 +49,10 @@ struct SystemDescription {
   AngleFeatures angle_features = AngleFeatures::kRaw;
   /// Action bounds (m entries each), or empty for unbounded.
   Eigen::VectorXd action_low, action_high;
+  /// Weights w_i of the state metric sum_i w_i d_i^2 (n entries, > 0), or empty for all 1.
+  Eigen::VectorXd loss_weights;
+  /// Whether the metric wraps the differences of angle components to (-pi, pi].
+  bool loss_wraps_angles = true;
 
   /// n, the size of the state.
   int state_size() const { return static_cast<int>(state_names.size()); }
@@ -54,6 +60,8 @@ struct SystemDescription {
   int action_size() const { return static_cast<int>(action_names.size()); }
   /// Whether state component i is an angle.
   bool is_angle(int i) const { return std::binary_search(angles.begin(), angles.end(), i); }
+  /// w_i of the state metric (1 when loss_weights is empty).
+  double loss_weight(int i) const { return loss_weights.size() > 0 ? loss_weights[i] : 1.0; }
   /// Whether learned models replace angle components by (sin, cos) pairs.
   bool encodes_angles() const {
     return angle_features == AngleFeatures::kSinCos && !angles.empty();
@@ -82,6 +90,14 @@ struct SystemDescription {
       DIFFDYN_CHECK(k == 0 || angles[k] > angles[k - 1], "system '", name,
                     "': angle indices must increase");
     }
+    if (loss_weights.size() > 0) {
+      DIFFDYN_CHECK(loss_weights.size() == state_size(), "system '", name, "': loss_weights need ",
+                    state_size(), " entries, got ", loss_weights.size());
+      for (int i = 0; i < state_size(); ++i) {
+        DIFFDYN_CHECK(std::isfinite(loss_weights[i]) && loss_weights[i] > 0, "system '", name,
+                      "': the loss weight of ", state_names[i], " must be positive and finite");
+      }
+    }
     const bool bounded = action_low.size() > 0 || action_high.size() > 0;
     if (!bounded) return;
     DIFFDYN_CHECK(action_low.size() == action_size() && action_high.size() == action_size(),
@@ -97,7 +113,8 @@ struct SystemDescription {
   bool SameLayout(const SystemDescription& o) const {
     return state_names == o.state_names && action_names == o.action_names &&
            angles == o.angles && angle_features == o.angle_features &&
-           action_low == o.action_low && action_high == o.action_high;
+           action_low == o.action_low && action_high == o.action_high &&
+           loss_weights == o.loss_weights && loss_wraps_angles == o.loss_wraps_angles;
   }
 };
 
@@ -106,7 +123,8 @@ inline std::string AngleFeaturesName(AngleFeatures a) {
   return a == AngleFeatures::kSinCos ? "sincos" : "raw";
 }
 
-/// {"name", "state", "action", "angles", "angle_features"[, "action_low", "action_high"]}.
+/// {"name", "state", "action", "angles", "angle_features"[, "action_low", "action_high"]
+/// [, "loss_weights"][, "loss_wraps_angles"]} (the last two only when not the defaults).
 inline nlohmann::json SystemToJson(const SystemDescription& s) {
   nlohmann::json j = {{"name", s.name},
                       {"state", s.state_names},
@@ -118,6 +136,11 @@ inline nlohmann::json SystemToJson(const SystemDescription& s) {
     j["action_high"] =
         std::vector<double>(s.action_high.data(), s.action_high.data() + s.action_high.size());
   }
+  if (s.loss_weights.size() > 0) {
+    j["loss_weights"] =
+        std::vector<double>(s.loss_weights.data(), s.loss_weights.data() + s.loss_weights.size());
+  }
+  if (!s.loss_wraps_angles) j["loss_wraps_angles"] = false;
   return j;
 }
 
@@ -166,6 +189,11 @@ inline SystemDescription SystemFromJson(const nlohmann::json& j) {
                   "system: 'action_low' and 'action_high' come together");
     s.action_low = numbers("action_low");
     s.action_high = numbers("action_high");
+  }
+  if (j.contains("loss_weights")) s.loss_weights = numbers("loss_weights");
+  if (j.contains("loss_wraps_angles")) {
+    DIFFDYN_CHECK(j["loss_wraps_angles"].is_boolean(), "system: 'loss_wraps_angles' must be true or false");
+    s.loss_wraps_angles = j["loss_wraps_angles"].get<bool>();
   }
   s.Validate();
   return s;

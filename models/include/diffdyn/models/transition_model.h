@@ -14,6 +14,15 @@
 // MPPI: B samples at once, one sample per column. Derivatives come from the
 // concrete model types' templated paths (Jets) and reverse-mode VJPs.
 //
+// Data sampled irregularly (real logs) gives each transition its own interval dt;
+// PredictBatchOver passes it: continuous-time systems integrate over it, models of
+// one fixed interval (learned models, the oracle) ignore it.
+//
+// A model that can be trained (DifferentiableTransitionModel) adds a flat
+// parameter vector and batched reverse mode: Forward records a tape in the
+// workspace, Backward pulls a cotangent of the next state back to the parameters
+// and the state. The trainer (solvers/training.h) needs nothing else.
+//
 // The model is immutable; scratch space lives in a workspace, one per thread:
 //
 //   auto ws = model.MakeWorkspace(/*max_batch=*/1000);
@@ -27,6 +36,7 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/models/system_description.h"
 
 namespace diffdyn {
 
@@ -47,6 +57,10 @@ class TransitionModel {
   virtual int action_size() const = 0;
   /// The model-file kind ("abs-nn", "res-node", "oracle", ...).
   virtual std::string kind() const = 0;
+  /// What its states and actions are; the default names them x1..xn and u1..um.
+  virtual SystemDescription description() const {
+    return SystemDescription::Unnamed(state_size(), action_size());
+  }
 
   /// Scratch space for batches of up to `max_batch` samples (one per thread).
   virtual std::unique_ptr<TransitionWorkspace> MakeWorkspace(int max_batch) const = 0;
@@ -57,6 +71,20 @@ class TransitionModel {
   virtual void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
                             const Eigen::Ref<const Eigen::MatrixXd>& actions,
                             Eigen::Ref<Eigen::MatrixXd> next, TransitionWorkspace& ws) const = 0;
+
+  /// next(:, b) = F(states(:, b), actions(:, b)) over the interval dt(b) (seconds, B
+  /// entries). The default ignores dt (a model of one fixed interval).
+  virtual void PredictBatchOver(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                                const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                                const Eigen::Ref<const Eigen::RowVectorXd>& dt,
+                                Eigen::Ref<Eigen::MatrixXd> next, TransitionWorkspace& ws) const {
+    DIFFDYN_CHECK(dt.size() == states.cols(), kind(), ": PredictBatchOver got ", dt.size(),
+                  " intervals for ", states.cols(), " samples");
+    PredictBatch(states, actions, next, ws);
+  }
+
+  /// Whether PredictBatchOver integrates over the given intervals.
+  virtual bool uses_intervals() const { return false; }
 
  protected:
   /// Checks the sizes of a PredictBatch call, naming them on failure.
@@ -71,6 +99,28 @@ class TransitionModel {
                   next.cols(), "; expected ", state_size(), "xB, ", action_size(), "xB, ",
                   state_size(), "xB");
   }
+};
+
+/// A transition model with parameters theta (one flat vector) and batched reverse mode.
+class DifferentiableTransitionModel : public TransitionModel {
+ public:
+  /// p, the number of parameters.
+  virtual Eigen::Index num_parameters() const = 0;
+  /// theta (p entries) and writable access for an optimiser.
+  virtual const Eigen::VectorXd& parameters() const = 0;
+  virtual Eigen::VectorXd& mutable_parameters() = 0;
+
+  /// next = F(states, actions) (n x B, m x B, n x B), recording in `ws` what Backward
+  /// needs. Throws diffdyn::NumericalError if the prediction is not finite.
+  virtual void Forward(const Eigen::Ref<const Eigen::MatrixXd>& states,
+                       const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                       Eigen::Ref<Eigen::MatrixXd> next, TransitionWorkspace& ws) const = 0;
+
+  /// Reverse mode of the last Forward on `ws`: given dl_dnext = dL/dnext (n x B), adds
+  /// dL/dtheta to *grad_params (p entries; may be null) and writes dL/dstates (n x B;
+  /// resized; may be null).
+  virtual void Backward(const Eigen::Ref<const Eigen::MatrixXd>& dl_dnext, TransitionWorkspace& ws,
+                        Eigen::VectorXd* grad_params, Eigen::MatrixXd* dl_dstates) const = 0;
 };
 
 }  // namespace diffdyn

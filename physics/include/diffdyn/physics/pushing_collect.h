@@ -82,7 +82,7 @@ Rng TrajectoryRng(std::uint64_t seed, std::uint64_t index);
 /// Simulates options.trajectories trajectories of up to options.length pushes.
 /// A trajectory ends early with status off_table or unreachable. Throws
 /// diffdyn::Error for bad options. `stats` may be null.
-std::vector<PushingTrajectory> CollectPushingData(const CollectOptions& options,
+std::vector<Trajectory> CollectPushingData(const CollectOptions& options,
                                                   CollectStats* stats = nullptr);
 
 }  // namespace diffdyn

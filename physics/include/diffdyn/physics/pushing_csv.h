@@ -13,8 +13,11 @@
 // row, an action on the last row), text in numeric fields and non-finite numbers
 // (nan, inf) with an error naming the file and line.
 //
+// A trajectory reads into the one Trajectory type (models/trajectory.h): states
+// 3 x (T + 1), actions 3 x T, times t_k = k (pushes), label = the trajectory number.
+//
 //   auto data = diffdyn::ReadPushingCsv("shared/data/pybullet_pushing/collected_data.csv");
-//   for (const auto& traj : data) use(traj.states, traj.actions);   // T+1 and T rows
+//   for (const auto& traj : data) use(traj.states, traj.actions);   // 3 x (T+1), 3 x T
 //   diffdyn::WritePushingCsvFile("out.csv", data);                   // atomic
 //
 // Numbers are written in the shortest form that reads back to the same double,
@@ -34,16 +37,9 @@
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/trajectory.h"
 
 namespace diffdyn {
-
-/// One trajectory: T + 1 block poses (x, y, theta) and the T actions
-/// (push_location, push_angle, push_length) between them; T may be 0.
-struct PushingTrajectory {
-  std::vector<Eigen::Vector3d> states;
-  std::vector<Eigen::Vector3d> actions;
-  std::string status = "ok";
-};
 
 namespace pushing_csv_internal {
 
@@ -73,10 +69,28 @@ inline void AppendNumber(std::string& out, double value) {
 
 }  // namespace pushing_csv_internal
 
+/// The pushing Trajectory of `poses` (T + 1) and `actions` (T), times 0..T.
+inline Trajectory MakePushingTrajectory(const std::vector<Eigen::Vector3d>& poses,
+                                        const std::vector<Eigen::Vector3d>& actions,
+                                        std::string label = "", std::string status = "ok") {
+  Trajectory t;
+  t.label = std::move(label);
+  t.status = std::move(status);
+  const int samples = static_cast<int>(poses.size());
+  t.t = Eigen::VectorXd::LinSpaced(samples, 0.0, samples - 1.0);
+  t.states.resize(3, samples);
+  for (int k = 0; k < samples; ++k) t.states.col(k) = poses[k];
+  t.actions.resize(3, static_cast<Eigen::Index>(actions.size()));
+  for (std::size_t k = 0; k < actions.size(); ++k) {
+    t.actions.col(static_cast<Eigen::Index>(k)) = actions[k];
+  }
+  return t;
+}
+
 /// Reads a pushing CSV (with or without `status`). Throws diffdyn::Error naming
 /// `path` and the line for a missing file, a wrong header, a bad or non-finite
 /// number or a ragged trajectory.
-inline std::vector<PushingTrajectory> ReadPushingCsv(const std::filesystem::path& path) {
+inline std::vector<Trajectory> ReadPushingCsv(const std::filesystem::path& path) {
   using pushing_csv_internal::kColumns;
   std::ifstream in(path);
   DIFFDYN_CHECK(in.good(), path.string(), ": cannot open pushing CSV");
@@ -92,7 +106,14 @@ inline std::vector<PushingTrajectory> ReadPushingCsv(const std::filesystem::path
                 "push_length[,status], got '",
                 line, "'");
 
-  std::vector<PushingTrajectory> trajectories;
+  // The trajectory being read: poses, actions, number and status.
+  struct Open {
+    std::vector<Eigen::Vector3d> poses, actions;
+    long id = 0;
+    std::string status = "ok";
+  };
+  std::vector<Trajectory> trajectories;
+  Open current;
   long current_id = 0;
   bool open = false;  // the last trajectory has a row without action yet to come
   int line_number = 1;
@@ -136,21 +157,23 @@ inline std::vector<PushingTrajectory> ReadPushingCsv(const std::filesystem::path
                     " ends without a row without action (missing action before the last row)");
       DIFFDYN_CHECK(step == 0, where(), "ragged: trajectory ", id, " starts at step ", step,
                     ", expected 0");
-      trajectories.emplace_back();
+      current = Open{};
+      current.id = id;
       current_id = id;
       open = true;
     } else {
-      const long expected = static_cast<long>(trajectories.back().states.size());
+      const long expected = static_cast<long>(current.poses.size());
       DIFFDYN_CHECK(step == expected, where(), "ragged: trajectory ", id, " has step ", step,
                     " where step ", expected, " was expected (non-contiguous steps)");
     }
-    auto& traj = trajectories.back();
-    traj.states.push_back(state);
+    current.poses.push_back(state);
     if (no_action) {
       open = false;
-      if (has_status && !fields[8].empty()) traj.status = std::string(fields[8]);
+      if (has_status && !fields[8].empty()) current.status = std::string(fields[8]);
+      trajectories.push_back(MakePushingTrajectory(
+          current.poses, current.actions, std::to_string(current.id), current.status));
     } else {
-      traj.actions.emplace_back(parse_double(5), parse_double(6), parse_double(7));
+      current.actions.emplace_back(parse_double(5), parse_double(6), parse_double(7));
     }
   }
   DIFFDYN_CHECK(!open, path.string(), ":", line_number, ": ragged: trajectory ", current_id,
@@ -160,27 +183,29 @@ inline std::vector<PushingTrajectory> ReadPushingCsv(const std::filesystem::path
 
 /// Writes `trajectories` as a pushing CSV to `out`; numbering is 0, 1, ... in order.
 /// With `with_status` the last row of each trajectory carries its status.
-/// Throws diffdyn::Error if a trajectory's states and actions do not fit (T+1 vs T).
-inline void WritePushingCsv(std::ostream& out, const std::vector<PushingTrajectory>& trajectories,
+/// Throws diffdyn::Error if a trajectory's states and actions are not 3 x (T + 1) and 3 x T.
+inline void WritePushingCsv(std::ostream& out, const std::vector<Trajectory>& trajectories,
                             bool with_status = true) {
   using pushing_csv_internal::AppendNumber;
   std::string text = "trajectory,step,x,y,theta,push_location,push_angle,push_length";
   text += with_status ? ",status\n" : "\n";
   for (size_t t = 0; t < trajectories.size(); ++t) {
     const auto& traj = trajectories[t];
-    DIFFDYN_CHECK(traj.states.size() == traj.actions.size() + 1, "pushing trajectory ", t,
-                  " has ", traj.states.size(), " states and ", traj.actions.size(),
-                  " actions; expected one more state than actions");
-    for (size_t s = 0; s < traj.states.size(); ++s) {
-      text += std::to_string(t) + "," + std::to_string(s);
+    DIFFDYN_CHECK(traj.states.rows() == 3 && traj.actions.rows() == 3 &&
+                      traj.states.cols() == traj.actions.cols() + 1,
+                  "pushing trajectory ", t, " has states ", traj.states.rows(), "x",
+                  traj.states.cols(), " and actions ", traj.actions.rows(), "x", traj.actions.cols(),
+                  "; expected 3 x (T + 1) and 3 x T");
+    for (Eigen::Index s = 0; s < traj.states.cols(); ++s) {
+      text += StrCat(t, ",", s);
       for (int k = 0; k < 3; ++k) {
         text += ',';
-        AppendNumber(text, traj.states[s][k]);
+        AppendNumber(text, traj.states(k, s));
       }
-      if (s < traj.actions.size()) {
+      if (s < traj.actions.cols()) {
         for (int k = 0; k < 3; ++k) {
           text += ',';
-          AppendNumber(text, traj.actions[s][k]);
+          AppendNumber(text, traj.actions(k, s));
         }
         if (with_status) text += ',';
       } else {
@@ -195,7 +220,7 @@ inline void WritePushingCsv(std::ostream& out, const std::vector<PushingTrajecto
 
 /// WritePushingCsv into `path` atomically (temporary file, then rename).
 inline void WritePushingCsvFile(const std::filesystem::path& path,
-                                const std::vector<PushingTrajectory>& trajectories,
+                                const std::vector<Trajectory>& trajectories,
                                 bool with_status = true) {
   WriteFileAtomically(path,
                       [&](std::ostream& out) { WritePushingCsv(out, trajectories, with_status); });

@@ -16,6 +16,7 @@
 
 #include "diffdyn/models/transition_model.h"
 #include "diffdyn/physics/pushing_env.h"
+#include "diffdyn/physics/pushing_system.h"
 
 namespace diffdyn {
 
@@ -27,6 +28,7 @@ class PushingOracle : public TransitionModel {
   int state_size() const override { return 3; }
   int action_size() const override { return 3; }
   std::string kind() const override { return "oracle"; }
+  SystemDescription description() const override { return PushingSystem(); }
 
   /// A workspace owning one PushingEnv (built with this model's config).
   std::unique_ptr<TransitionWorkspace> MakeWorkspace(int max_batch) const override;

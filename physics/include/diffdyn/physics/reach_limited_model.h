@@ -41,6 +41,7 @@ class ReachLimitedModel : public TransitionModel {
   int action_size() const override { return 3; }
   /// The inner model's kind: the wrapper changes no model file.
   std::string kind() const override { return model_.kind(); }
+  SystemDescription description() const override { return model_.description(); }
   std::unique_ptr<TransitionWorkspace> MakeWorkspace(int max_batch) const override {
     return model_.MakeWorkspace(max_batch);
   }

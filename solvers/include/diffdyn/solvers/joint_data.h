@@ -6,7 +6,10 @@
 //
 // stored column-wise (n x N matrices). The joint-space CSV of shared/DESIGN.md
 // has a header naming its columns t, q1..qn, qd1..qn, tau1..taun and optional
-// qdd1..qddn, in any order; n is found from the q columns. The real datasets of
+// qdd1..qddn, in any order; n is found from the q columns. Optional: a
+// `trajectory` column (a number or label; a new value starts a new segment, t may
+// restart there) and ground-truth channels m1..mn (H qdd), c1..cn (Coriolis and
+// centrifugal), g1..gn (gravity), f1..fn (friction), kinetic, potential. The real datasets of
 // shared/data/ are read in their own formats, detected from the path:
 //
 //   panda_gaz2019_traj1/   exciting_traj_{time,positions,velocity,torques}.txt
@@ -25,6 +28,7 @@
 // diffdyn::Error naming the file and line.
 #pragma once
 
+#include <map>
 #include <string>
 #include <vector>
 
@@ -44,6 +48,9 @@ struct JointData {
   bool has_qd = true;  ///< false: qd was not measured
   bool has_tau = true; ///< false: free motion, tau = 0
   std::vector<int> segment_starts = {0};  ///< first sample of each segment
+  std::vector<std::string> segment_labels; ///< the `trajectory` value of each segment, or empty
+  /// Ground-truth channels by name ("m", "c", "g", "f": n x N; "kinetic", "potential": 1 x N).
+  std::map<std::string, Eigen::MatrixXd> channels;
   std::vector<double> link_lengths_px;    ///< ibm: mean marker distances (pixels)
   std::string notes;   ///< what the reader did (for the report)
 
@@ -59,7 +66,8 @@ JointData ReadJointCsv(const std::string& path);
 /// Reads `path`: a joint-space CSV or one of the real datasets (header comment).
 JointData ReadMeasured(const std::string& path);
 
-/// Writes `data` as a joint-space CSV (atomically); qdd columns only if present.
+/// Writes `data` as a joint-space CSV (atomically); qdd columns only if present, a
+/// `trajectory` column when there are several segments, then the channels.
 void WriteJointCsv(const std::string& path, const JointData& data);
 
 }  // namespace diffdyn

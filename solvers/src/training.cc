@@ -1,4 +1,4 @@
-#include "diffdyn/solvers/pushing_training.h"
+#include "diffdyn/solvers/training.h"
 
 #include <algorithm>
 #include <chrono>
@@ -12,69 +12,82 @@
 #include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/adam.h"
 #include "diffdyn/models/losses.h"
-#include "diffdyn/models/pose_loss.h"
+#include "diffdyn/models/state_loss.h"
 
 namespace diffdyn {
 
-std::vector<PushingTrajectory> ReadPushingData(const std::filesystem::path& path) {
-  return ReadPushingCsv(path);
-}
-
-PushingWindows MakePushingWindows(const std::vector<PushingTrajectory>& trajectories, int horizon) {
-  DIFFDYN_CHECK(horizon >= 1, "MakePushingWindows: horizon must be >= 1, got ", horizon);
+Windows MakeWindows(const Dataset& data, int horizon) {
+  DIFFDYN_CHECK(horizon >= 1, "MakeWindows: horizon must be >= 1, got ", horizon);
   int count = 0;
-  for (const PushingTrajectory& t : trajectories) {
-    count += std::max(0, static_cast<int>(t.actions.size()) - horizon + 1);
-  }
-  DIFFDYN_CHECK(count > 0, "no ", horizon, "-step windows in ", trajectories.size(),
+  for (const Trajectory& t : data.trajectories) count += std::max(0, t.transitions() - horizon + 1);
+  DIFFDYN_CHECK(count > 0, data.path, ": no ", horizon, "-step windows in ", data.trajectories.size(),
                 " trajectories (too short or empty data)");
-  PushingWindows w;
+  const int n = data.system.state_size(), m = data.system.action_size();
+  Windows w;
+  w.system = data.system;
   w.horizon = horizon;
-  w.start.resize(3, count);
-  w.actions.assign(horizon, Eigen::MatrixXd(3, count));
-  w.targets.assign(horizon, Eigen::MatrixXd(3, count));
+  w.start.resize(n, count);
+  w.actions.assign(horizon, Eigen::MatrixXd(m, count));
+  w.targets.assign(horizon, Eigen::MatrixXd(n, count));
+  w.dt.assign(horizon, Eigen::RowVectorXd(count));
   int i = 0;
-  for (const PushingTrajectory& t : trajectories) {
-    const int windows = static_cast<int>(t.actions.size()) - horizon + 1;
+  for (const Trajectory& t : data.trajectories) {
+    const int windows = t.transitions() - horizon + 1;
     for (int s = 0; s < windows; ++s, ++i) {
-      w.start.col(i) = t.states[s];
+      w.start.col(i) = t.states.col(s);
       for (int k = 0; k < horizon; ++k) {
-        w.actions[k].col(i) = t.actions[s + k];
-        w.targets[k].col(i) = t.states[s + k + 1];
+        w.actions[k].col(i) = t.actions.col(s + k);
+        w.targets[k].col(i) = t.states.col(s + k + 1);
+        w.dt[k](i) = t.t[s + k + 1] - t.t[s + k];
       }
     }
   }
   return w;
 }
 
-PushingWindows SelectWindows(const PushingWindows& data, std::span<const int> index) {
-  PushingWindows w;
+Windows SelectWindows(const Windows& data, std::span<const int> index) {
+  Windows w;
+  w.system = data.system;
   w.horizon = data.horizon;
   GatherColumnBlocks(data.start, index, 1, &w.start);
   w.actions.resize(data.horizon);
   w.targets.resize(data.horizon);
+  w.dt.resize(data.horizon);
   for (int k = 0; k < data.horizon; ++k) {
     GatherColumnBlocks(data.actions[k], index, 1, &w.actions[k]);
     GatherColumnBlocks(data.targets[k], index, 1, &w.targets[k]);
+    w.dt[k].resize(static_cast<Eigen::Index>(index.size()));
+    for (std::size_t j = 0; j < index.size(); ++j) w.dt[k](static_cast<Eigen::Index>(j)) = data.dt[k](index[j]);
   }
   return w;
 }
 
-double RolloutLoss(const TransitionModel& model, const PushingWindows& data, double gamma,
+void CheckModelFits(const TransitionModel& model, const SystemDescription& system,
+                    const std::string& what) {
+  DIFFDYN_CHECK(model.state_size() == system.state_size() && model.action_size() == system.action_size(),
+                what, ": the model (", model.kind(), ") takes ", model.state_size(), " states and ",
+                model.action_size(), " actions; the data (", system.name, ") have ", system.state_size(),
+                " and ", system.action_size());
+}
+
+double RolloutLoss(const TransitionModel& model, const Windows& data, double gamma,
                    int threads, int chunk_size, std::vector<double>* per_step) {
+  CheckModelFits(model, data.system, "RolloutLoss");
   const int n = data.size();
   const int k_max = data.horizon;
   const int chunks = NumChunks(n, chunk_size);
-  // Per chunk: K partial sums of SE2 (scaled by 1 / N).
+  // Per chunk: K partial sums of D (scaled by 1 / N).
   std::vector<std::vector<double>> partial(chunks, std::vector<double>(k_max, 0.0));
   ParallelForChunks(n, chunk_size, threads, [&](int c, int begin, int end) {
     const int nb = end - begin;
     auto ws = model.MakeWorkspace(nb);
     Eigen::MatrixXd x = data.start.middleCols(begin, nb);
-    Eigen::MatrixXd next(3, nb);
+    Eigen::MatrixXd next(x.rows(), nb);
     for (int k = 0; k < k_max; ++k) {
-      model.PredictBatch(x, data.actions[k].middleCols(begin, nb), next, *ws);
-      partial[c][k] = Se2PoseLoss(next, data.targets[k].middleCols(begin, nb), 1.0 / n, nullptr);
+      model.PredictBatchOver(x, data.actions[k].middleCols(begin, nb), data.dt[k].segment(begin, nb),
+                             next, *ws);
+      partial[c][k] =
+          StateLoss(data.system, next, data.targets[k].middleCols(begin, nb), 1.0 / n, nullptr);
       x.swap(next);
     }
   });
@@ -88,17 +101,25 @@ double RolloutLoss(const TransitionModel& model, const PushingWindows& data, dou
   return loss;
 }
 
-PushingEvaluation EvaluatePushingModel(const TransitionModel& model,
-                                       const std::vector<PushingTrajectory>& trajectories,
-                                       int threads) {
+double BaselineLoss(const Windows& data) {
+  return StateLoss(data.system, data.start, data.targets[0], 1.0 / data.size(), nullptr);
+}
+
+Evaluation EvaluateModel(const TransitionModel& model, const Dataset& data, int threads) {
   constexpr int kHorizon = 4;
-  PushingEvaluation e;
-  const PushingWindows single = MakePushingWindows(trajectories, 1);
+  CheckModelFits(model, data.system, data.path);
+  Evaluation e;
+  const Windows single = MakeWindows(data, 1);
   e.n_samples = single.size();
   e.single_step_loss = RolloutLoss(model, single, 1.0, threads);
-  const PushingWindows multi = MakePushingWindows(trajectories, kHorizon);
-  e.n_windows = multi.size();
-  e.avg_multi_step_loss = RolloutLoss(model, multi, 1.0, threads) / kHorizon;
+  e.baseline_single_step_loss = BaselineLoss(single);
+  int windows = 0;
+  for (const Trajectory& t : data.trajectories) windows += std::max(0, t.transitions() - kHorizon + 1);
+  e.n_windows = windows;
+  e.avg_multi_step_loss = std::numeric_limits<double>::quiet_NaN();
+  if (windows > 0) {
+    e.avg_multi_step_loss = RolloutLoss(model, MakeWindows(data, kHorizon), 1.0, threads) / kHorizon;
+  }
   return e;
 }
 
@@ -112,7 +133,7 @@ struct Trainer::Chunk {
   Eigen::VectorXd grad;
   double loss = 0.0;
 
-  void Resize(const LearnedModel& model, int horizon, int nb) {
+  void Resize(const DifferentiableTransitionModel& model, int n, int m, int horizon, int nb) {
     if (static_cast<int>(tapes.size()) != horizon) {
       tapes.clear();
       for (int k = 0; k < horizon; ++k) tapes.push_back(model.MakeWorkspace(nb));
@@ -121,21 +142,19 @@ struct Trainer::Chunk {
     grad.resize(model.num_parameters());
     if (size == nb) return;
     size = nb;
-    x.assign(horizon + 1, Eigen::MatrixXd(3, nb));
-    u.assign(horizon, Eigen::MatrixXd(3, nb));
-    target.assign(horizon, Eigen::MatrixXd(3, nb));
-    g_loss.resize(3, nb);
-    g_state.resize(3, nb);
-    carry.resize(3, nb);
+    x.assign(horizon + 1, Eigen::MatrixXd(n, nb));
+    u.assign(horizon, Eigen::MatrixXd(m, nb));
+    target.assign(horizon, Eigen::MatrixXd(n, nb));
+    g_loss.resize(n, nb);
+    g_state.resize(n, nb);
+    carry.resize(n, nb);
   }
 };
 
-Trainer::Trainer(LearnedModel* model, const TrainOptions& options)
+Trainer::Trainer(DifferentiableTransitionModel* model, const TrainOptions& options)
     : model_(model), options_(options) {
   DIFFDYN_CHECK(model != nullptr, "Trainer needs a model");
-  DIFFDYN_CHECK(model->state_size() == 3 && model->action_size() == 3,
-                "Trainer: pushing windows need a model of 3 states and 3 actions, got ",
-                model->state_size(), " and ", model->action_size());
+  DIFFDYN_CHECK(options.patience >= 0, "--patience must be >= 0, got ", options.patience);
   DIFFDYN_CHECK(options.epochs >= 1, "--epochs must be >= 1, got ", options.epochs);
   DIFFDYN_CHECK(options.learning_rate > 0 && std::isfinite(options.learning_rate),
                 "--lr must be positive, got ", options.learning_rate);
@@ -149,7 +168,7 @@ Trainer::Trainer(LearnedModel* model, const TrainOptions& options)
 
 Trainer::~Trainer() = default;
 
-double Trainer::BatchLossAndGradient(const PushingWindows& data, std::span<const int> index,
+double Trainer::BatchLossAndGradient(const Windows& data, std::span<const int> index,
                                      Eigen::VectorXd* grad) {
   const int n = static_cast<int>(index.size());
   DIFFDYN_CHECK(n > 0, "Trainer: empty batch");
@@ -157,11 +176,12 @@ double Trainer::BatchLossAndGradient(const PushingWindows& data, std::span<const
   const int chunks = NumChunks(n, options_.chunk_size);
   while (static_cast<int>(chunks_.size()) < chunks) chunks_.push_back(std::make_unique<Chunk>());
   const double scale = 1.0 / n;
-  const LearnedModel& model = *model_;
+  const DifferentiableTransitionModel& model = *model_;
+  const int n_state = data.system.state_size(), n_action = data.system.action_size();
   ParallelForChunks(n, options_.chunk_size, options_.threads, [&](int c, int begin, int end) {
     Chunk& ch = *chunks_[c];
     const int nb = end - begin;
-    ch.Resize(model, horizon, nb);
+    ch.Resize(model, n_state, n_action, horizon, nb);
     const std::span<const int> idx = index.subspan(begin, nb);
     // Gather the chunk's windows.
     for (int j = 0; j < nb; ++j) {
@@ -180,7 +200,7 @@ double Trainer::BatchLossAndGradient(const PushingWindows& data, std::span<const
     ch.carry.setZero();
     for (int k = horizon - 1; k >= 0; --k) {
       const double w = std::pow(options_.gamma, k);
-      ch.loss += w * Se2PoseLoss(ch.x[k + 1], ch.target[k], scale, &ch.g_loss);
+      ch.loss += w * StateLoss(data.system, ch.x[k + 1], ch.target[k], scale, &ch.g_loss);
       if (grad == nullptr) continue;
       ch.carry += w * ch.g_loss;
       model.Backward(ch.carry, *ch.tapes[k], &ch.grad, k > 0 ? &ch.g_state : nullptr);
@@ -197,8 +217,9 @@ double Trainer::BatchLossAndGradient(const PushingWindows& data, std::span<const
   return loss;
 }
 
-TrainResult Trainer::Train(const PushingWindows& data,
+TrainResult Trainer::Train(const Windows& data,
                            const std::function<void(const EpochReport&)>& on_epoch) {
+  CheckModelFits(*model_, data.system, "train");
   const int n = data.size();
   TrainResult result;
   result.n_val = static_cast<int>(std::lround(options_.val_fraction * n));
@@ -212,7 +233,7 @@ TrainResult Trainer::Train(const PushingWindows& data,
   Shuffle(order.begin(), order.end(), split_rng);
   const std::span<const int> val_index(order.data(), result.n_val);
   std::vector<int> train_index(order.begin() + result.n_val, order.end());
-  const PushingWindows val = SelectWindows(data, val_index);
+  const Windows val = SelectWindows(data, val_index);
 
   Adam adam(model_->num_parameters(), {.learning_rate = options_.learning_rate});
   MiniBatcher batcher(result.n_train, options_.batch_size, /*drop_last=*/false, options_.seed + 1);
@@ -220,6 +241,8 @@ TrainResult Trainer::Train(const PushingWindows& data,
   Eigen::VectorXd grad(model_->num_parameters());
   ProgressBar bar("train", options_.epochs, options_.progress);
   std::vector<double> times;
+  double best_val = std::numeric_limits<double>::infinity();
+  int since_best = 0;
   for (int epoch = 1; epoch <= options_.epochs; ++epoch) {
     batcher.Shuffle();
     const auto start = std::chrono::steady_clock::now();
@@ -257,6 +280,14 @@ TrainResult Trainer::Train(const PushingWindows& data,
     result.epochs.push_back(report);
     bar.Update(epoch, StrCat("epoch ", epoch, " train ", report.train_loss, " val ", report.val_loss));
     if (on_epoch) on_epoch(report);
+    // Early stop: no improvement of the validation loss for `patience` epochs.
+    if (report.val_loss < best_val) {
+      best_val = report.val_loss;
+      since_best = 0;
+    } else if (options_.patience > 0 && result.n_val > 0 && ++since_best >= options_.patience) {
+      result.stopped_early = epoch < options_.epochs;
+      break;
+    }
   }
   bar.Finish();
   std::vector<double> sorted = times;

@@ -1,8 +1,9 @@
-// Non-finite data rejected by file and line, pushing windows, the SE(2) loss, the
-// Trainer's batch gradients (single- and multi-step, through the NeuralODE) against
-// finite differences, determinism at any thread count, learning, divergence
-// reporting and the evaluation metrics.
-#include "diffdyn/solvers/pushing_training.h"
+// Non-finite data rejected by file and line, windows, the state metric (pushing's
+// pose loss, wrapped joint-space angles), the Trainer's batch gradients (single- and
+// multi-step, through the NeuralODE) against finite differences, determinism at any
+// thread count, learning, early stop, divergence reporting and the evaluation
+// metrics, per-transition intervals included.
+#include "diffdyn/solvers/training.h"
 
 #include <unistd.h>
 
@@ -17,32 +18,40 @@
 #include <gtest/gtest.h>
 
 #include "diffdyn/autodiff_ode/random.h"
-#include "diffdyn/models/pose_loss.h"
+#include "diffdyn/models/continuous_model.h"
+#include "diffdyn/models/learned_model.h"
+#include "diffdyn/models/state_loss.h"
+#include "diffdyn/physics/pushing_csv.h"
+#include "diffdyn/physics/pushing_system.h"
+#include "diffdyn/solvers/dataset_io.h"
 
 namespace diffdyn {
 namespace {
 
 // Trajectories of a smooth synthetic pushing law (not any model here):
 // x_{t+1} = x_t + 0.05 u_2 (cos(theta + u_1), sin(theta + u_1), 0.5 u_0).
-std::vector<PushingTrajectory> SyntheticTrajectories(int count, int pushes, std::uint64_t seed) {
+Dataset SyntheticTrajectories(int count, int pushes, std::uint64_t seed) {
   Rng rng(seed);
-  std::vector<PushingTrajectory> out(count);
-  for (PushingTrajectory& t : out) {
+  Dataset out;
+  out.system = PushingSystem();
+  out.path = "synthetic";
+  for (int i = 0; i < count; ++i) {
     Eigen::Vector3d x(0.4, 0.0, 0.2 * M_PI);
-    t.states.push_back(x);
+    std::vector<Eigen::Vector3d> poses{x}, actions;
     for (int k = 0; k < pushes; ++k) {
       const Eigen::Vector3d u(2 * UniformUnit(rng) - 1, M_PI * (UniformUnit(rng) - 0.5), UniformUnit(rng));
       x += 0.05 * u[2] * Eigen::Vector3d(std::cos(x[2] + u[1]), std::sin(x[2] + u[1]), 0.5 * u[0]);
-      t.actions.push_back(u);
-      t.states.push_back(x);
+      actions.push_back(u);
+      poses.push_back(x);
     }
+    out.trajectories.push_back(MakePushingTrajectory(poses, actions));
   }
   return out;
 }
 
 // Non-finite numbers are rejected by the reader itself, naming the file and the
 // line as counted in the file (blank lines included), for states and actions alike.
-TEST(ReadPushingData, NonFiniteNumbersNameFileAndLine) {
+TEST(ReadDataset, NonFiniteNumbersNameFileAndLine) {
   const std::string header = "trajectory,step,x,y,theta,push_location,push_angle,push_length\n";
   const std::string path = ::testing::TempDir() + "/pushing_training_nonfinite_" +
                            std::to_string(::getpid()) + ".csv";
@@ -55,7 +64,7 @@ TEST(ReadPushingData, NonFiniteNumbersNameFileAndLine) {
       out << header << row2 << "\n\n" << row4 << "\n";  // line 3 is blank
     }
     try {
-      ReadPushingData(path);
+      ReadDataset(path);
       ADD_FAILURE() << "accepted " << row2 << " / " << row4;
     } catch (const Error& e) {
       const std::string what = e.what();
@@ -67,31 +76,39 @@ TEST(ReadPushingData, NonFiniteNumbersNameFileAndLine) {
     std::ofstream out(path);
     out << header << "0,0,0.4,0,0,0,0,0.5\n\n0,1,0.1,0,0,,,\n";
   }
-  const auto good = ReadPushingData(path);
-  ASSERT_EQ(good.size(), 1u);
-  EXPECT_EQ(good[0].actions.size(), 1u);
-  EXPECT_DOUBLE_EQ(good[0].states[1][0], 0.1);
+  const Dataset good = ReadDataset(path);
+  ASSERT_EQ(good.trajectories.size(), 1u);
+  EXPECT_EQ(good.format, "pushing-csv");
+  EXPECT_EQ(good.system.name, "pushing");
+  EXPECT_EQ(good.trajectories[0].transitions(), 1);
+  EXPECT_DOUBLE_EQ(good.trajectories[0].states(0, 1), 0.1);
   std::remove(path.c_str());
 }
 
-TEST(PushingWindows, CountsAndContents) {
-  const auto trajs = SyntheticTrajectories(3, 10, 1);
-  const PushingWindows one = MakePushingWindows(trajs, 1);
-  const PushingWindows four = MakePushingWindows(trajs, 4);
+TEST(Windows, CountsAndContents) {
+  Dataset data = SyntheticTrajectories(3, 10, 1);
+  data.trajectories[1].t[5] = 4.5;  // dt 0.5 then 1.5 around step 5
+  const auto& trajs = data.trajectories;
+  const Windows one = MakeWindows(data, 1);
+  const Windows four = MakeWindows(data, 4);
   EXPECT_EQ(one.size(), 30);
   EXPECT_EQ(four.size(), 21);  // 7 per 10-push trajectory, as in the paper
   // Window 8 of horizon 4 is trajectory 1, start step 1.
-  EXPECT_EQ(four.start.col(8), trajs[1].states[1]);
-  EXPECT_EQ(four.actions[3].col(8), trajs[1].actions[4]);
-  EXPECT_EQ(four.targets[3].col(8), trajs[1].states[5]);
+  EXPECT_EQ(four.start.col(8), trajs[1].states.col(1));
+  EXPECT_EQ(four.actions[3].col(8), trajs[1].actions.col(4));
+  EXPECT_EQ(four.targets[3].col(8), trajs[1].states.col(5));
+  EXPECT_EQ(four.dt[3](8), 0.5);
+  EXPECT_EQ(four.dt[2](8), 1.0);
   std::vector<int> index{8, 0};
-  const PushingWindows picked = SelectWindows(four, index);
+  const Windows picked = SelectWindows(four, index);
   EXPECT_EQ(picked.size(), 2);
   EXPECT_EQ(picked.targets[2].col(0), four.targets[2].col(8));
-  EXPECT_THROW(MakePushingWindows(SyntheticTrajectories(2, 3, 1), 4), Error);
+  EXPECT_EQ(picked.dt[3](0), 0.5);
+  EXPECT_THROW(MakeWindows(SyntheticTrajectories(2, 3, 1), 4), Error);
 }
 
-TEST(Se2PoseLoss, ValueAndGradientMatchDefinitionAndFiniteDifferences) {
+// Pushing's metric is the paper's pose loss: theta weighted by r_g, not wrapped.
+TEST(StateLoss, PushingIsThePoseLossWithFiniteDifferenceGradient) {
   Rng rng(2);
   Eigen::MatrixXd pred(3, 5), target(3, 5);
   for (Eigen::Index i = 0; i < pred.size(); ++i) {
@@ -99,7 +116,8 @@ TEST(Se2PoseLoss, ValueAndGradientMatchDefinitionAndFiniteDifferences) {
     target.data()[i] = StandardNormal(rng);
   }
   Eigen::MatrixXd grad;
-  const double loss = Se2PoseLoss(pred, target, 1.0 / 5, &grad);
+  const SystemDescription pushing = PushingSystem();
+  const double loss = StateLoss(pushing, pred, target, 1.0 / 5, &grad);
   const Eigen::MatrixXd d = pred - target;
   const double expected = d.row(0).squaredNorm() / 5 + d.row(1).squaredNorm() / 5 +
                           std::sqrt(0.02 / 12) * d.row(2).squaredNorm() / 5;
@@ -110,9 +128,30 @@ TEST(Se2PoseLoss, ValueAndGradientMatchDefinitionAndFiniteDifferences) {
     Eigen::MatrixXd p = pred, m = pred;
     p.data()[i] += eps;
     m.data()[i] -= eps;
-    const double fd = (Se2PoseLoss(p, target, 0.2, nullptr) - Se2PoseLoss(m, target, 0.2, nullptr)) / (2 * eps);
+    const double fd =
+        (StateLoss(pushing, p, target, 0.2, nullptr) - StateLoss(pushing, m, target, 0.2, nullptr)) / (2 * eps);
     EXPECT_NEAR(grad.data()[i], fd, 1e-8);
   }
+  // Not wrapped: a 2 pi error in theta counts.
+  Eigen::MatrixXd turned = target;
+  turned(2, 0) += 2 * M_PI;
+  EXPECT_GT(StateLoss(pushing, turned, target, 1.0, nullptr), 1.0);
+}
+
+// Joint space: angles wrapped to (-pi, pi], a prismatic joint not; weights 1.
+TEST(StateLoss, JointSpaceWrapsRevoluteAnglesOnly) {
+  const SystemDescription cartpole = JointSpaceSystem(2, {.prismatic = {1}});
+  Eigen::MatrixXd target = Eigen::MatrixXd::Zero(4, 1), pred(4, 1);
+  pred << 0.1, 2 * M_PI + 0.2, 0.3, -0.4;
+  Eigen::MatrixXd grad;
+  const double loss = StateLoss(cartpole, pred, target, 1.0, &grad);
+  EXPECT_NEAR(loss, 0.01 + 0.04 + 0.09 + 0.16, 1e-12);
+  EXPECT_NEAR(grad(1, 0), 0.4, 1e-12);
+  pred(0, 0) = 2 * M_PI;  // the cart is not an angle
+  EXPECT_NEAR(StateLoss(cartpole, pred, target, 1.0, nullptr), 4 * M_PI * M_PI + 0.29, 1e-9);
+  EXPECT_NEAR(WrapAngle(M_PI), M_PI, 1e-15);
+  EXPECT_NEAR(WrapAngle(-M_PI), M_PI, 1e-15);
+  EXPECT_NEAR(WrapAngle(3 * M_PI + 0.5), -M_PI + 0.5, 1e-12);
 }
 
 struct GradientCase {
@@ -138,8 +177,9 @@ TEST_P(TrainerGradient, BatchGradientMatchesFiniteDifferences) {
   // (see learned_model_test.cc). ReLU's own VJP is checked in tests/models.
   config.activation = Activation::Tanh();
   if (TableauOf(c.method).adaptive) config.tolerance = 1e-12;
+  config.system = PushingSystem();
   LearnedModel model = LearnedModel::Initialized(config, 4);
-  const PushingWindows data = MakePushingWindows(SyntheticTrajectories(4, 8, 3), c.horizon);
+  const Windows data = MakeWindows(SyntheticTrajectories(4, 8, 3), c.horizon);
   std::vector<int> index(data.size());
   std::iota(index.begin(), index.end(), 0);
   // Chunks of 7 samples: the batch is split, as with both cores.
@@ -178,7 +218,7 @@ LearnedModelConfig TinyNode() {
 }
 
 TEST(Trainer, SameBytesAtAnyThreadCountAndSeedMatters) {
-  const PushingWindows data = MakePushingWindows(SyntheticTrajectories(30, 10, 5), 1);
+  const Windows data = MakeWindows(SyntheticTrajectories(30, 10, 5), 1);
   auto run = [&](int threads, std::uint64_t seed) {
     LearnedModel model = LearnedModel::Initialized(TinyNode(), 1);
     Trainer trainer(&model, {.epochs = 2, .batch_size = 64, .seed = seed, .threads = threads,
@@ -197,7 +237,7 @@ TEST(Trainer, SameBytesAtAnyThreadCountAndSeedMatters) {
 }
 
 TEST(Trainer, LearnsASyntheticPushingLaw) {
-  const PushingWindows data = MakePushingWindows(SyntheticTrajectories(60, 10, 6), 1);
+  const Windows data = MakeWindows(SyntheticTrajectories(60, 10, 6), 1);
   LearnedModel model = LearnedModel::Initialized(
       {.type = LearnedKind::kResNn, .hidden = 32}, 2);
   const double before = RolloutLoss(model, data, 1.0);
@@ -213,8 +253,8 @@ TEST(Trainer, LearnsASyntheticPushingLaw) {
 
 TEST(Trainer, ReportsDivergenceAsNumericalError) {
   auto trajs = SyntheticTrajectories(10, 10, 7);
-  trajs[3].states[4][1] = std::numeric_limits<double>::quiet_NaN();
-  const PushingWindows data = MakePushingWindows(trajs, 1);
+  trajs.trajectories[3].states(1, 4) = std::numeric_limits<double>::quiet_NaN();
+  const Windows data = MakeWindows(trajs, 1);
   LearnedModel model = LearnedModel::Initialized({.type = LearnedKind::kAbsNn, .hidden = 8}, 3);
   Trainer trainer(&model, {.epochs = 2, .batch_size = 1000, .val_fraction = 0.0, .progress = false});
   try {
@@ -227,27 +267,102 @@ TEST(Trainer, ReportsDivergenceAsNumericalError) {
   EXPECT_THROW(Trainer(&model, {.val_fraction = 1.0}), Error);
 }
 
-TEST(EvaluatePushingModel, MetricsFollowTheirDefinitions) {
-  const auto trajs = SyntheticTrajectories(5, 10, 8);
-  const LearnedModel model = LearnedModel::Initialized({.type = LearnedKind::kAbsNn, .hidden = 8}, 4);
-  const PushingEvaluation e = EvaluatePushingModel(model, trajs, 2);
+// Early stop: with a learning rate that makes the validation loss grow, training
+// ends `patience` epochs after the best one.
+TEST(Trainer, StopsEarlyWhenValidationStopsImproving) {
+  const Windows data = MakeWindows(SyntheticTrajectories(20, 10, 9), 1);
+  LearnedModel model = LearnedModel::Initialized({.type = LearnedKind::kAbsNn, .hidden = 8}, 5);
+  Trainer trainer(&model, {.epochs = 50, .learning_rate = 0.5, .batch_size = 20, .patience = 2,
+                           .progress = false});
+  const TrainResult r = trainer.Train(data);
+  ASSERT_TRUE(r.stopped_early) << r.epochs.size() << " epochs";
+  ASSERT_GE(r.epochs.size(), 3u);
+  const std::size_t last = r.epochs.size() - 1;
+  double best = r.epochs[0].val_loss;
+  for (std::size_t e = 0; e + 2 < r.epochs.size(); ++e) best = std::min(best, r.epochs[e].val_loss);
+  EXPECT_GE(r.epochs[last].val_loss, best);
+  EXPECT_GE(r.epochs[last - 1].val_loss, best);
+  EXPECT_THROW(Trainer(&model, {.patience = -1}), Error);
+}
+
+TEST(EvaluateModel, MetricsFollowTheirDefinitions) {
+  const Dataset data = SyntheticTrajectories(5, 10, 8);
+  const auto& trajs = data.trajectories;
+  LearnedModelConfig config{.type = LearnedKind::kAbsNn, .hidden = 8};
+  config.system = PushingSystem();
+  const LearnedModel model = LearnedModel::Initialized(config, 4);
+  const Evaluation e = EvaluateModel(model, data, 2);
   EXPECT_EQ(e.n_samples, 50);
   EXPECT_EQ(e.n_windows, 35);
-  // Single step by hand, one sample at a time through the templated path.
-  double single = 0.0;
+  // Single step and baseline by hand, one sample at a time through the templated path.
+  double single = 0.0, baseline = 0.0;
   for (const auto& t : trajs) {
-    for (size_t s = 0; s < t.actions.size(); ++s) {
-      const Eigen::Vector3d p = model.Predict(t.states[s], t.actions[s]);
-      single += Se2PoseLoss(p, t.states[s + 1], 1.0 / 50, nullptr);
+    for (int s = 0; s < t.transitions(); ++s) {
+      const Eigen::Vector3d p = model.Predict(t.states.col(s), t.actions.col(s));
+      single += StateLoss(data.system, p, t.states.col(s + 1), 1.0 / 50, nullptr);
+      baseline += StateLoss(data.system, t.states.col(s), t.states.col(s + 1), 1.0 / 50, nullptr);
     }
   }
   EXPECT_NEAR(e.single_step_loss, single, 1e-12 * single);
+  EXPECT_NEAR(e.baseline_single_step_loss, baseline, 1e-12 * baseline);
   std::vector<double> steps;
-  RolloutLoss(model, MakePushingWindows(trajs, 4), 1.0, 1, 3, &steps);
+  RolloutLoss(model, MakeWindows(data, 4), 1.0, 1, 3, &steps);
   ASSERT_EQ(steps.size(), 4u);
   EXPECT_NEAR(e.avg_multi_step_loss, (steps[0] + steps[1] + steps[2] + steps[3]) / 4, 1e-12);
   // Rollouts drift: the first step of the windows is the single-step loss of their starts.
   EXPECT_GT(steps[3], 0.0);
+  // A model of other sizes is refused, naming the data.
+  const LearnedModel other = LearnedModel::Initialized(
+      {.type = LearnedKind::kAbsNn, .hidden = 8, .system = SystemDescription::Unnamed(2, 1)}, 4);
+  EXPECT_THROW(EvaluateModel(other, data), Error);
+}
+
+// dx/dt = -x + u: x(dt) = u + (x0 - u) exp(-dt), exact for the test's tolerance.
+struct Relax {
+  template <typename T>
+  void operator()(const VectorX<T>& x, const VectorX<T>& u, const VectorX<T>&, double,
+                  VectorX<T>& dxdt) const {
+    dxdt = u - x;
+  }
+};
+
+// A continuous-time model integrates each transition over its own interval: on
+// irregularly sampled exact data its loss is at rounding level, while a model of
+// the median interval alone is not.
+TEST(EvaluateModel, PhysicsModelsIntegrateEachTransitionsOwnInterval) {
+  Dataset data;
+  data.system = SystemDescription::Unnamed(1, 1);
+  data.path = "relax";
+  Rng rng(3);
+  for (int i = 0; i < 4; ++i) {
+    Trajectory t;
+    const int samples = 12;
+    t.t.resize(samples);
+    t.states.resize(1, samples);
+    t.actions.resize(1, samples - 1);
+    t.t[0] = 0.0;
+    t.states(0, 0) = StandardNormal(rng);
+    for (int k = 0; k + 1 < samples; ++k) {
+      const double dt = 0.01 + 0.05 * UniformUnit(rng);
+      t.actions(0, k) = StandardNormal(rng);
+      t.t[k + 1] = t.t[k] + dt;
+      t.states(0, k + 1) = t.actions(0, k) + (t.states(0, k) - t.actions(0, k)) * std::exp(-dt);
+    }
+    data.trajectories.push_back(t);
+  }
+  const SampleIntervals dt = data.Intervals();
+  EXPECT_GT(dt.jitter(), 0.5);
+  const ContinuousTransitionModel<Relax> model(Relax{}, data.system, Eigen::VectorXd(),
+                                               {.method = Method::kRk4Classic, .dt = dt.median, .substeps = 8});
+  const Evaluation e = EvaluateModel(model, data);
+  EXPECT_LT(e.single_step_loss, 1e-14 * e.baseline_single_step_loss);
+  // The same model at one fixed interval (PredictBatch) misses.
+  const Windows single = MakeWindows(data, 1);
+  auto ws = model.MakeWorkspace(single.size());
+  Eigen::MatrixXd fixed(1, single.size());
+  model.PredictBatch(single.start, single.actions[0], fixed, *ws);
+  EXPECT_GT(StateLoss(data.system, fixed, single.targets[0], 1.0 / single.size(), nullptr),
+            1e-6 * e.baseline_single_step_loss);
 }
 
 }  // namespace

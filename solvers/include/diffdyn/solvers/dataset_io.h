@@ -1,0 +1,73 @@
+// Reading and writing datasets: the pushing CSV, the joint-space CSV and the real
+// datasets of shared/data/, all into the one Dataset type (models/trajectory.h).
+//
+//   file or folder                    system                       trajectories
+//   pushing CSV (header               pushing (physics/            one per trajectory
+//     trajectory,step,x,y,theta,...)    pushing_system.h)            number, t_k = k
+//   joint-space CSV (t, q, qd, tau,   joint space: x = (q, qd),    one per `trajectory`
+//     ...; solvers/joint_data.h)        u = the actuated tau         value (or t restart)
+//   panda_gaz2019_traj1/, DeLaN       joint space                  its segments
+//     characters, IBM double pendulum
+//
+// A joint-space description names the state q1..qn, qd1..qdn and the action
+// tau_j of each actuated joint (by default the joints whose torque is not zero
+// throughout the data: the cart-pole task pushes the cart only); every q_j is an
+// angle (wrapped in the loss, seen as sin/cos by learned models) unless the
+// layout lists joint j as prismatic. The measured torque of every joint stays in the channel "tau", and
+// qdd and the ground-truth components (m, c, g, f, kinetic, potential) in their
+// channels. Errors name the file and line (diffdyn::Error).
+//
+//   Dataset data = ReadDataset("cartpole.csv", {.actuated = {1}, .prismatic = {1}});
+//   WriteDataset("copy.csv", data);   // the schema it was read with
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "diffdyn/models/trajectory.h"
+#include "diffdyn/solvers/joint_data.h"
+
+namespace diffdyn {
+
+/// How a joint-space dataset's system description is built.
+struct JointLayout {
+  /// 1-based joints whose torque is part of the action; empty = the joints whose
+  /// torque is not zero throughout the data (every joint if all are zero).
+  std::vector<int> actuated;
+  /// Every joint's torque is part of the action (overrides `actuated`).
+  bool all_actuated = false;
+  /// 1-based joints that are prismatic (not angles); empty = every joint revolute.
+  std::vector<int> prismatic;
+  /// How learned models see the angles.
+  AngleFeatures angle_features = AngleFeatures::kSinCos;
+  /// The description's label.
+  std::string name = "joint-space";
+};
+
+/// The joint-space description of an n-joint robot under `layout` (an empty
+/// `actuated` means every joint here); throws diffdyn::Error for a joint index outside 1..n.
+SystemDescription JointSpaceSystem(int n, const JointLayout& layout = {});
+
+/// The dataset of joint-space measurements: one trajectory per segment, states
+/// [q; qd], actions the actuated torques (the last sample's torque is a channel
+/// only), channels "tau", "qdd" (if present) and the ground truth.
+Dataset JointDataset(const JointData& data, const JointLayout& layout = {});
+
+/// Reads a pushing CSV, a joint-space CSV or a real-data folder (file comment);
+/// `layout` applies to joint-space data. Throws diffdyn::Error naming the file.
+Dataset ReadDataset(const std::string& path, const JointLayout& layout = {});
+
+/// `data` as the model of description `model` sees it. With the same state names,
+/// the model's description is taken (angles, bounds; the metric stays the data's:
+/// loss weights and wrapping) and its actions are formed by
+/// name: from the data's actions, or, for tauJ, from the channel "tau" (a model of
+/// the actuated joints on data of every joint). Otherwise the data's description
+/// stays and only the sizes must agree. Throws diffdyn::Error naming `what`.
+Dataset DatasetForModel(const Dataset& data, const SystemDescription& model, const std::string& what);
+
+/// Writes `data` atomically in the schema of its format: the pushing CSV for
+/// "pushing-csv", else the joint-space CSV (states must then be [q; qd] with the
+/// torque of every joint in the channel "tau" or as the action).
+void WriteDataset(const std::string& path, const Dataset& data);
+
+}  // namespace diffdyn
