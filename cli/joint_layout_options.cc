@@ -37,6 +37,10 @@ void AddJointLayoutOptions(CLI::App* command, JointLayoutOptions& options) {
       ->capture_default_str();
   command->add_option("--prismatic", options.prismatic,
                       "Joint-space data: joints that are not angles (not wrapped, no sin/cos), e.g. 1");
+  command->add_option("--angle-features", options.angle_features,
+                      "Joint-space data: learned models see angles as sincos (sin q, cos q) or raw (q)")
+      ->check(CLI::IsMember({"sincos", "raw"}))
+      ->capture_default_str();
 }
 
 JointLayout ResolveJointLayout(const JointLayoutOptions& options) {
@@ -46,6 +50,7 @@ JointLayout ResolveJointLayout(const JointLayoutOptions& options) {
   } else if (options.actuated != "auto") {
     layout.actuated = ParseJointList(options.actuated, "--actuated");
   }
+  layout.angle_features = options.angle_features == "raw" ? AngleFeatures::kRaw : AngleFeatures::kSinCos;
   if (!options.prismatic.empty()) layout.prismatic = ParseJointList(options.prismatic, "--prismatic");
   return layout;
 }

@@ -4,6 +4,7 @@
 //   --actuated auto|all|LIST   joints whose torque is an action (auto: the ones
 //                              whose torque is not zero throughout the data)
 //   --prismatic LIST           joints that are not angles (e.g. a cart)
+//   --angle-features sincos|raw  how learned models see the angles
 //
 // LIST is 1-based joint numbers separated by commas ("1" or "1,3").
 #pragma once
@@ -20,9 +21,10 @@ namespace diffdyn::cli {
 struct JointLayoutOptions {
   std::string actuated = "auto";
   std::string prismatic;
+  std::string angle_features = "sincos";
 };
 
-/// Adds --actuated and --prismatic to `command`.
+/// Adds --actuated, --prismatic and --angle-features to `command`.
 void AddJointLayoutOptions(CLI::App* command, JointLayoutOptions& options);
 
 /// The layout the options name; throws diffdyn::Error naming the option for a bad list.

@@ -15,10 +15,6 @@ constexpr int kChunk = 4;  // trajectories per chunk (one PushingEnv each)
 
 }  // namespace
 
-Rng TrajectoryRng(std::uint64_t seed, std::uint64_t index) {
-  return Rng(SplitMix64Hash(SplitMix64Hash(seed) ^ index));
-}
-
 Eigen::Vector3d SampleStartPose(StartDistribution starts, Rng& rng) {
   constexpr double kPi = std::numbers::pi;
   if (starts == StartDistribution::kSeed) return {0.4, 0.0, 0.2 * kPi};

@@ -338,7 +338,10 @@ void WriteJointCsv(const std::string& path, const JointData& data) {
     }
     for (int j = 1; j <= n; ++j) out << ",tau" << j;
     for (const auto& [name, values] : data.channels) {
-      if (values.rows() == 1) {
+      const bool scalar = std::find(std::begin(kScalarChannels), std::end(kScalarChannels), name) !=
+                          std::end(kScalarChannels);
+      DIFFDYN_CHECK(!scalar || values.rows() == 1, path, ": channel ", name, " must have one row");
+      if (scalar) {
         out << "," << name;
       } else {
         for (int j = 1; j <= values.rows(); ++j) out << "," << name << j;

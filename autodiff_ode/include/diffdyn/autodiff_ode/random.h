@@ -60,6 +60,12 @@ double UniformUnit(Generator& rng) {
   return static_cast<double>(rng() >> 11) * 0x1.0p-53;
 }
 
+/// The generator of item `index` of a seeded collection: independent streams, so
+/// that items can be made on any thread in any order with the same result.
+inline Rng TrajectoryRng(std::uint64_t seed, std::uint64_t index) {
+  return Rng(SplitMix64Hash(SplitMix64Hash(seed) ^ index));
+}
+
 /// Uniform double in [lo, hi).
 inline double Uniform(Rng& rng, double lo, double hi) { return lo + (hi - lo) * UniformUnit(rng); }
 

@@ -76,13 +76,10 @@ inline Eigen::Vector3d SamplePushAction(Rng& rng) {
 /// A start pose from `starts` (see the file comment).
 Eigen::Vector3d SampleStartPose(StartDistribution starts, Rng& rng);
 
-/// The generator of trajectory `index`: a SplitMix64 hash of (seed, index).
-Rng TrajectoryRng(std::uint64_t seed, std::uint64_t index);
-
 /// Simulates options.trajectories trajectories of up to options.length pushes.
 /// A trajectory ends early with status off_table or unreachable. Throws
 /// diffdyn::Error for bad options. `stats` may be null.
 std::vector<Trajectory> CollectPushingData(const CollectOptions& options,
-                                                  CollectStats* stats = nullptr);
+                                           CollectStats* stats = nullptr);
 
 }  // namespace diffdyn
