@@ -36,6 +36,7 @@ struct TrainCommandOptions {
   double gamma = 0.9;
   int threads = 0;
   int patience = 0;
+  std::string normalize = "auto";
   JointLayoutOptions layout;
   std::string out = "model.json";
 };
@@ -57,6 +58,15 @@ void RunTrain(const TrainCommandOptions& o) {
                 "' (expected single or multi)");
   const int horizon = o.loss == "multi" ? 4 : 1;
   const Windows data = MakeWindows(dataset, horizon);
+  // Unit-scale network inputs and outputs, fitted on the training split's first steps.
+  const bool normalize = o.normalize == "on" || (o.normalize == "auto" && dataset.format != "pushing-csv");
+  if (normalize) {
+    std::vector<int> train_index;
+    SplitWindows(data.size(), o.val_fraction, o.common.seed, &train_index, nullptr);
+    DIFFDYN_CHECK(!train_index.empty(), "--val-fraction ", o.val_fraction, " leaves no training samples");
+    const Windows train = SelectWindows(data, train_index);
+    config.scaling = FitScaling(config, train.start, train.actions[0], train.targets[0]);
+  }
 
   LearnedModel model = LearnedModel::Initialized(config, o.common.seed);
   TrainOptions options;
@@ -77,7 +87,8 @@ void RunTrain(const TrainCommandOptions& o) {
       {"loss", o.loss},             {"gamma", o.gamma},        {"epochs", o.epochs},
       {"lr", o.lr},                 {"batch", o.batch},        {"val_fraction", o.val_fraction},
       {"n_train", result.n_train},  {"n_val", result.n_val},    {"dt", dt.median},
-      {"dt_min", dt.min},           {"dt_max", dt.max},        {"epochs_run", result.epochs.size()}};
+      {"dt_min", dt.min},           {"dt_max", dt.max},        {"epochs_run", result.epochs.size()},
+      {"normalized", normalize}};
   const nlohmann::json metrics = {{"final_train_loss", Number(result.final_train_loss)},
                                   {"final_val_loss", Number(result.final_val_loss)},
                                   {"seconds_per_epoch", result.seconds_per_epoch}};
@@ -92,6 +103,7 @@ void RunTrain(const TrainCommandOptions& o) {
                {"system", dataset.system.name},
                {"dt", dt.median},
                {"dt_jitter", dt.jitter()},
+               {"normalized", normalize},
                {"seconds_per_epoch", result.seconds_per_epoch},
                {"final_train_loss", Number(result.final_train_loss)},
                {"final_val_loss", Number(result.final_val_loss)},
@@ -141,6 +153,11 @@ void RegisterTrainCommand(CLI::App& app) {
   command->add_option("--threads", o->threads, "Threads (0: all cores; results do not depend on it)");
   command->add_option("--patience", o->patience,
                       "Stop when the validation loss has not improved for this many epochs (0: never)");
+  command->add_option("--normalize", o->normalize,
+                      "Scale the network's inputs and outputs to unit size from the training data: "
+                      "auto = on except for pushing CSVs (the paper's models), on, off")
+      ->check(CLI::IsMember({"auto", "on", "off"}))
+      ->capture_default_str();
   AddJointLayoutOptions(command, o->layout);
   command->add_option("--out", o->out, "Model file to write");
   command->callback([o] { RunTrain(*o); });

@@ -162,14 +162,11 @@ void WriteGrid(const fs::path& path, const std::vector<Run>& runs, const std::st
   });
 }
 
-// The held-out windows of the trainer's seeded split (validation first in the shuffled order).
+// The held-out windows of the trainer's seeded split.
 Windows HeldOut(const Windows& data, std::uint64_t seed, double fraction) {
-  std::vector<int> order(data.size());
-  std::iota(order.begin(), order.end(), 0);
-  Rng split(seed);
-  Shuffle(order.begin(), order.end(), split);
-  const int n_val = static_cast<int>(std::lround(fraction * data.size()));
-  return SelectWindows(data, std::span<const int>(order.data(), n_val));
+  std::vector<int> val;
+  SplitWindows(data.size(), fraction, seed, nullptr, &val);
+  return SelectWindows(data, val);
 }
 
 }  // namespace

@@ -62,6 +62,17 @@ Windows SelectWindows(const Windows& data, std::span<const int> index) {
   return w;
 }
 
+void SplitWindows(int n, double val_fraction, std::uint64_t seed, std::vector<int>* train,
+                  std::vector<int>* val) {
+  std::vector<int> order(n);
+  std::iota(order.begin(), order.end(), 0);
+  Rng split_rng(seed);
+  Shuffle(order.begin(), order.end(), split_rng);
+  const int n_val = static_cast<int>(std::lround(val_fraction * n));
+  if (val) val->assign(order.begin(), order.begin() + n_val);
+  if (train) train->assign(order.begin() + n_val, order.end());
+}
+
 void CheckModelFits(const TransitionModel& model, const SystemDescription& system,
                     const std::string& what) {
   DIFFDYN_CHECK(model.state_size() == system.state_size() && model.action_size() == system.action_size(),
@@ -227,12 +238,8 @@ TrainResult Trainer::Train(const Windows& data,
   DIFFDYN_CHECK(result.n_train >= 1, "Trainer: no training samples left after the split (", n,
                 " windows, --val-fraction ", options_.val_fraction, ")");
   // Seeded split: a shuffled permutation, validation first.
-  std::vector<int> order(n);
-  std::iota(order.begin(), order.end(), 0);
-  Rng split_rng(options_.seed);
-  Shuffle(order.begin(), order.end(), split_rng);
-  const std::span<const int> val_index(order.data(), result.n_val);
-  std::vector<int> train_index(order.begin() + result.n_val, order.end());
+  std::vector<int> train_index, val_index;
+  SplitWindows(n, options_.val_fraction, options_.seed, &train_index, &val_index);
   const Windows val = SelectWindows(data, val_index);
 
   Adam adam(model_->num_parameters(), {.learning_rate = options_.learning_rate});

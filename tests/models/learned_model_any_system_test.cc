@@ -33,13 +33,28 @@ SystemDescription PendulumLike() {
 
 struct Case {
   LearnedKind type;
-  bool pendulum;  // else 5 states, 2 actions, no angles
+  bool pendulum;        // else 5 states, 2 actions, no angles
+  bool scaled = false;  // with input and output scalings (Scaling)
 };
 
 std::string CaseName(const ::testing::TestParamInfo<Case>& info) {
   std::string name = LearnedKindName(info.param.type);
   for (char& c : name) c = c == '-' ? '_' : c;
-  return name.append(info.param.pendulum ? "_pendulum" : "_wide");
+  name.append(info.param.pendulum ? "_pendulum" : "_wide");
+  return name.append(info.param.scaled ? "_scaled" : "");
+}
+
+// Shifts in [-1, 1] and scales in [0.5, 2] for every network input and output.
+Scaling SomeScaling(const LearnedModelConfig& config, std::uint64_t seed) {
+  const MlpArchitecture arch = config.Architecture();
+  Rng rng(seed);
+  const auto draw = [&](int size, double low, double high) {
+    Eigen::VectorXd v(size);
+    for (int i = 0; i < size; ++i) v[i] = low + (high - low) * UniformUnit(rng);
+    return v;
+  };
+  const int f = arch.sizes.front(), o = arch.sizes.back();
+  return {draw(f, -1, 1), draw(f, 0.5, 2), draw(o, -1, 1), draw(o, 0.5, 2)};
 }
 
 // A smooth (tanh) field, so that central differences see no kink.
@@ -51,6 +66,7 @@ LearnedModelConfig ConfigOf(const Case& c) {
   config.hidden = 9;
   config.activation = Activation::Tanh();
   config.system = c.pendulum ? PendulumLike() : SystemDescription::Unnamed(5, 2);
+  if (c.scaled) config.scaling = SomeScaling(config, 11);
   return config;
 }
 
@@ -141,7 +157,9 @@ INSTANTIATE_TEST_SUITE_P(
     Kinds, AnySystem,
     ::testing::Values(Case{LearnedKind::kAbsNn, true}, Case{LearnedKind::kResNn, true},
                       Case{LearnedKind::kAbsNode, true}, Case{LearnedKind::kResNode, true},
-                      Case{LearnedKind::kAbsNn, false}, Case{LearnedKind::kResNode, false}),
+                      Case{LearnedKind::kAbsNn, false}, Case{LearnedKind::kResNode, false},
+                      Case{LearnedKind::kAbsNn, true, true}, Case{LearnedKind::kResNn, false, true},
+                      Case{LearnedKind::kAbsNode, true, true}, Case{LearnedKind::kResNode, true, true}),
     CaseName);
 
 TEST(LearnedModelFile, RecordsTheSystemAndReadsFilesWithoutOne) {
@@ -182,6 +200,71 @@ TEST(LearnedModelFile, RecordsTheSystemAndReadsFilesWithoutOne) {
     EXPECT_NE(std::string(e.what()).find("mismatch.json"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("2 states and 1 actions"), std::string::npos) << e.what();
   }
+}
+
+// A scaled model's file keeps the scalings (same predictions to the bit); scalings of
+// the wrong size or with a scale <= 0 are refused, naming the file.
+TEST(LearnedModelFile, KeepsScalingsAndRefusesBadOnes) {
+  const std::filesystem::path dir = ::testing::TempDir();
+  const LearnedModel model =
+      LearnedModel::Initialized(ConfigOf({LearnedKind::kAbsNode, /*pendulum=*/true, /*scaled=*/true}), 8);
+  SaveLearnedModel(dir / "scaled.json", model);
+  const LearnedModel back = LoadLearnedModel(dir / "scaled.json");
+  const Eigen::Vector2d x(0.3, -2.0);
+  const Eigen::Matrix<double, 1, 1> u(0.8);
+  EXPECT_EQ(back.Predict(x, u), model.Predict(x, u));
+  EXPECT_FALSE(back.features().identity());
+  EXPECT_FALSE(back.output_map().identity());
+
+  std::ifstream in(dir / "scaled.json");
+  const nlohmann::json good = nlohmann::json::parse(in);
+  for (const auto& [key, value] : {std::pair<std::string, double>{"input_scale", -1.0},
+                                   std::pair<std::string, double>{"output_scale", 0.0}}) {
+    nlohmann::json j = good;
+    j["architecture"]["scaling"][key][0] = value;
+    std::ofstream(dir / "bad_scale.json") << j.dump();
+    try {
+      LoadLearnedModel(dir / "bad_scale.json");
+      FAIL() << key << " " << value << " was accepted";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("bad_scale.json"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("scales positive"), std::string::npos) << e.what();
+    }
+  }
+  nlohmann::json j = good;
+  j["architecture"]["scaling"]["input_shift"].erase(0);
+  std::ofstream(dir / "short_shift.json") << j.dump();
+  EXPECT_THROW(LoadLearnedModel(dir / "short_shift.json"), Error);
+}
+
+// FitScaling's input map takes the features of the fitting data to mean 0 and
+// standard deviation 1; its output map is the moments of the network's target (none
+// for res-node).
+TEST(FitScaling, MakesTheDataUnitScale) {
+  LearnedModelConfig config = ConfigOf({LearnedKind::kResNn, /*pendulum=*/true});
+  Rng rng(12);
+  const int count = 400;
+  Eigen::MatrixXd x = Normal(2, count, rng), u = 5.0 * Normal(1, count, rng);
+  x.row(1) = 10.0 * x.row(1).array() + 3.0;
+  Eigen::MatrixXd next = x;
+  next.row(1).array() += 0.2 * Normal(1, count, rng).row(0).array() + 0.05;
+  config.scaling = FitScaling(config, x, u, next);
+  const LearnedModel model = LearnedModel::Initialized(config, 1);
+  Eigen::MatrixXd z(3, count), features;
+  z << x, u;
+  model.features().Apply(z, features);
+  const Eigen::VectorXd mean = features.rowwise().mean();
+  const Eigen::VectorXd var =
+      (features.colwise() - mean).array().square().rowwise().sum() / static_cast<double>(count);
+  EXPECT_LT(mean.cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_LT((var.array() - 1.0).abs().maxCoeff(), 1e-9);
+  // res-nn's target x_{t+1} - x_t: row 0 is constant 0 (scale 1), row 1 ~ 0.05 + 0.2 N(0, 1).
+  EXPECT_EQ(config.scaling.output_scale[0], 1.0);
+  EXPECT_NEAR(config.scaling.output_shift[1], 0.05, 0.03);
+  EXPECT_NEAR(config.scaling.output_scale[1], 0.2, 0.03);
+  // res-node's field is not scaled (FitScaling's comment).
+  config.type = LearnedKind::kResNode;
+  EXPECT_FALSE(FitScaling(config, x, u, next).has_output());
 }
 
 TEST(SystemDescription, ValidatesAndRoundTripsThroughJson) {

@@ -130,7 +130,7 @@ TEST_P(PushingModelTest, SingleStepGradientsMatchFiniteDifferencesAndJets) {
   Jet jet_loss(0.0);
   for (int j = 0; j < b; ++j) {
     const Eigen::Vector3d x = states.col(j), u = actions.col(j);
-    const Eigen::Matrix<Jet, 3, 1> f = PredictLearned(jet_net, config, model.features(), x, u);
+    const Eigen::Matrix<Jet, 3, 1> f = PredictLearned(jet_net, config, model.features(), model.output_map(), x, u);
     for (int i = 0; i < 3; ++i) jet_loss += c(i, j) * f[i];
   }
   const double eps = 1e-5;
@@ -213,7 +213,7 @@ TEST_P(PushingModelTest, MultiStepRolloutGradientMatchesFiniteDifferencesAndJets
     for (int k = 0; k < horizon; ++k) {
       Eigen::Matrix<Jet, 3, 1> u;
       for (int i = 0; i < 3; ++i) u[i] = Jet(actions[k](i, j));
-      x = PredictLearned(jet_net, config, model.features(), x, u);
+      x = PredictLearned(jet_net, config, model.features(), model.output_map(), x, u);
       for (int i = 0; i < 3; ++i) jet_loss += weights[k](i, j) * x[i];
     }
   }

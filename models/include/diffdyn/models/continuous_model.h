@@ -121,6 +121,7 @@ class ContinuousTransitionModel final : public TransitionModel {
   int state_size() const override { return system_.state_size(); }
   int action_size() const override { return system_.action_size(); }
   std::string kind() const override { return kind_; }
+  double time_step() const override { return options_.dt; }
   SystemDescription description() const override { return system_; }
 
   std::unique_ptr<TransitionWorkspace> MakeWorkspace(int /*max_batch*/) const override {

@@ -20,6 +20,12 @@
 // z(1) is used, so the grid does not matter). Outputs are not wrapped: losses
 // compare angle components on the circle.
 //
+// Optional scalings (Scaling, fitted to the data by FitScaling) put the network's
+// inputs and outputs on unit scale, as state components in SI units (a cart's
+// metres, a joint's rad/s, torques in N m) are not: the network sees
+// (phi - mu_in) / sigma_in, and N(.) above stands for mu_out + sigma_out * MLP(.).
+// Without them (the paper's pushing models) both maps are the identity.
+//
 // Three paths compute F:
 //
 // 1. PredictBatch (TransitionModel): B samples at once, samples in columns, as
@@ -107,6 +113,31 @@ inline bool IsResidual(LearnedKind type) {
   return type == LearnedKind::kResNn || type == LearnedKind::kResNode;
 }
 
+/// Affine maps around a learned model's network (see the file comment): the network
+/// input is (phi - input_shift) / input_scale (f entries each), its output
+/// output_shift + output_scale * MLP (the MLP's outputs each). Empty vectors: identity.
+struct Scaling {
+  Eigen::VectorXd input_shift, input_scale, output_shift, output_scale;
+
+  bool has_input() const { return input_scale.size() > 0; }
+  bool has_output() const { return output_scale.size() > 0; }
+
+  /// Throws diffdyn::Error unless each pair is empty or of the given size, finite,
+  /// with positive scales.
+  void Validate(int inputs, int outputs) const {
+    const auto check = [](const Eigen::VectorXd& shift, const Eigen::VectorXd& scale, int size,
+                          const char* what) {
+      if (shift.size() == 0 && scale.size() == 0) return;
+      DIFFDYN_CHECK(shift.size() == size && scale.size() == size, "scaling: ", what, " needs ", size,
+                    " shifts and scales, got ", shift.size(), " and ", scale.size());
+      DIFFDYN_CHECK(shift.allFinite() && scale.allFinite() && (scale.array() > 0).all(), "scaling: ",
+                    what, " shifts must be finite and scales positive");
+    };
+    check(input_shift, input_scale, inputs, "input");
+    check(output_shift, output_scale, outputs, "output");
+  }
+};
+
 /// Everything that fixes a model's function apart from its parameters.
 struct LearnedModelConfig {
   LearnedKind type = LearnedKind::kAbsNode;
@@ -124,6 +155,8 @@ struct LearnedModelConfig {
   Activation activation = Activation::Relu();
   /// The system: n, m and the angle features (default: 3 unnamed states and actions).
   SystemDescription system = SystemDescription::Unnamed(3, 3);
+  /// Input and output scalings of the network (default: none).
+  Scaling scaling{};
 
   /// Sizes (f, h, h, n) for the NNs, (f, h, h, n + m) for the NeuralODEs, f the
   /// system's feature size; `activation` on both hidden layers.
@@ -141,6 +174,8 @@ struct LearnedModelConfig {
     DIFFDYN_CHECK(steps >= 2, "--steps must be >= 2 (grid points on [0, 1]), got ", steps);
     DIFFDYN_CHECK(tolerance > 0 && std::isfinite(tolerance), "tolerance must be positive, got ",
                   tolerance);
+    const MlpArchitecture arch = Architecture();
+    scaling.Validate(arch.sizes.front(), arch.sizes.back());
   }
 
   /// Solver options: dt = 1 / (steps - 1); for dopri5 also abs = rel = tolerance.
@@ -154,21 +189,26 @@ struct LearnedModelConfig {
   }
 };
 
-/// phi([x; u]): a system's input features for learned models (see the file comment).
-/// Built once from the description; `identity()` when no angle is encoded.
+/// The network input (phi([x; u]) - input_shift) / input_scale of a learned model
+/// (see the file comment). Built once from the description and the scaling;
+/// `identity()` when no angle is encoded and there is no input scaling.
 class FeatureMap {
  public:
   FeatureMap() = default;
-  explicit FeatureMap(const SystemDescription& system)
+  explicit FeatureMap(const SystemDescription& system, const Scaling& scaling = {})
       : inputs_(system.state_size() + system.action_size()), features_(system.feature_size()) {
+    if (scaling.has_input()) {
+      shift_ = scaling.input_shift;
+      inv_scale_ = scaling.input_scale.cwiseInverse();
+    }
     if (!system.encodes_angles()) return;
     for (int i = 0; i < inputs_; ++i) {
       if (i < system.state_size() && system.is_angle(i)) angle_inputs_.push_back(i);
     }
   }
 
-  /// Whether phi is the identity.
-  bool identity() const { return angle_inputs_.empty(); }
+  /// Whether the map is the identity.
+  bool identity() const { return angle_inputs_.empty() && shift_.size() == 0; }
   /// f, the number of features.
   int features() const { return features_; }
 
@@ -185,21 +225,25 @@ class FeatureMap {
         f.row(row++) = z.row(i);
       }
     }
+    if (shift_.size() > 0) f = (f.colwise() - shift_).array().colwise() * inv_scale_.array();
   }
 
   /// g_z = (dphi/dz)^T g_f at z, per column: g_z (n + m) x B (resized), g_f f x B.
   void Vjp(const Eigen::Ref<const Eigen::MatrixXd>& z, const Eigen::Ref<const Eigen::MatrixXd>& g_f,
            Eigen::MatrixXd& g_z) const {
     g_z.resize(inputs_, z.cols());
+    const bool scaled = shift_.size() > 0;
+    const auto s = [&](int row) { return scaled ? inv_scale_[row] : 1.0; };
     int row = 0, next_angle = 0;
     for (int i = 0; i < inputs_; ++i) {
       if (next_angle < static_cast<int>(angle_inputs_.size()) && angle_inputs_[next_angle] == i) {
-        g_z.row(i) = z.row(i).array().cos() * g_f.row(row).array() -
-                     z.row(i).array().sin() * g_f.row(row + 1).array();
+        g_z.row(i) = s(row) * z.row(i).array().cos() * g_f.row(row).array() -
+                     s(row + 1) * z.row(i).array().sin() * g_f.row(row + 1).array();
         row += 2;
         ++next_angle;
       } else {
-        g_z.row(i) = g_f.row(row++);
+        g_z.row(i) = s(row) * g_f.row(row);
+        ++row;
       }
     }
   }
@@ -221,12 +265,45 @@ class FeatureMap {
         f[row++] = z[i];
       }
     }
+    for (int r = 0; r < shift_.size(); ++r) f[r] = (f[r] - shift_[r]) * inv_scale_[r];
     return f;
   }
 
  private:
   int inputs_ = 0, features_ = 0;
   std::vector<int> angle_inputs_;  // indices of z that are encoded angles, increasing
+  Eigen::VectorXd shift_, inv_scale_;  // input scaling (empty: none)
+};
+
+/// y -> output_shift + output_scale * y, the network's output map (see Scaling).
+class OutputMap {
+ public:
+  OutputMap() = default;
+  explicit OutputMap(const Scaling& scaling) : shift_(scaling.output_shift), scale_(scaling.output_scale) {}
+
+  /// Whether the map is the identity.
+  bool identity() const { return scale_.size() == 0; }
+
+  /// y = shift + scale * y for a batch (rows: the network's outputs), in place.
+  void Apply(Eigen::Ref<Eigen::MatrixXd> y) const {
+    if (identity()) return;
+    y = (y.array().colwise() * scale_.array()).colwise() + shift_.array();
+  }
+
+  /// g = scale * g in place: the cotangent of the MLP's output from that of the map's.
+  void Pullback(Eigen::Ref<Eigen::MatrixXd> g) const {
+    if (!identity()) g = g.array().colwise() * scale_.array();
+  }
+
+  /// The map for one sample on any scalar.
+  template <typename T>
+  VectorX<T> operator()(VectorX<T> y) const {
+    for (int r = 0; r < scale_.size(); ++r) y[r] = T(shift_[r]) + scale_[r] * y[r];
+    return y;
+  }
+
+ private:
+  Eigen::VectorXd shift_, scale_;
 };
 
 /// The MLP forward passes of one taped solve, kept so that the backward pass need not
@@ -266,12 +343,13 @@ struct MlpForwardCache {
 struct MlpOdeSystem {
   const Mlp<double>* net = nullptr;
   const FeatureMap* features = nullptr;
+  const OutputMap* output = nullptr;
   MlpForwardCache* cache = nullptr;
 
   /// Buffers for one batch: the MLP's workspace plus input / output / gradient copies.
   struct Workspace {
     MlpWorkspace mlp;
-    Eigen::MatrixXd input, output, grad_input, grad_features;
+    Eigen::MatrixXd input, output, grad_input, grad_features, lambda;
   };
 
   /// n + m, the ODE state's size (the MLP's output size).
@@ -311,6 +389,7 @@ struct MlpOdeSystem {
     } else {
       net->Evaluate(z, dzdt, &ws.mlp);
     }
+    if (output != nullptr) output->Apply(dzdt);
   }
   /// vjp_z = (d M(phi(z)) / dz)^T lambda per column ((n + m) x B); grad_theta +=
   /// sum_b (dM/dtheta)^T lambda_b. Reuses a cached forward pass at exactly this input
@@ -344,8 +423,15 @@ struct MlpOdeSystem {
     // dL/dtheta goes straight into grad_theta (the sum over the solver's stages).
     // The cotangent buffers of ws.mlp serve every cached stage (when wide enough).
     const bool shared = forward != &ws.mlp && ws.mlp.chunk_size() >= forward->chunk_size();
-    net->BackwardAccumulate(lambda, grad_theta, &ws.grad_input, forward, 1,
-                            shared ? &ws.mlp : nullptr);
+    if (output != nullptr && !output->identity()) {
+      ws.lambda = lambda;
+      output->Pullback(ws.lambda);
+      net->BackwardAccumulate(ws.lambda, grad_theta, &ws.grad_input, forward, 1,
+                              shared ? &ws.mlp : nullptr);
+    } else {
+      net->BackwardAccumulate(lambda, grad_theta, &ws.grad_input, forward, 1,
+                              shared ? &ws.mlp : nullptr);
+    }
     if (encoded) {
       features->Vjp(z, ws.grad_input, ws.grad_features);
       vjp_z = ws.grad_features;
@@ -360,9 +446,10 @@ template <typename P>
 struct MlpOdeFunction {
   const Mlp<P>* net;
   const FeatureMap* features;
+  const OutputMap* output;
   template <typename T>
   void operator()(const VectorX<T>& z, VectorX<T>& dzdt, double) const {
-    dzdt = (*net)((*features)(z));
+    dzdt = (*output)(VectorX<T>((*net)((*features)(z))));
   }
 };
 
@@ -373,8 +460,8 @@ struct MlpOdeFunction {
 template <typename P, typename DX, typename DU,
           typename R = typename Mlp<P>::template ResultScalar<typename DX::Scalar>>
 VectorX<R> PredictLearned(const Mlp<P>& net, const LearnedModelConfig& config,
-                          const FeatureMap& features, const Eigen::MatrixBase<DX>& x,
-                          const Eigen::MatrixBase<DU>& u) {
+                          const FeatureMap& features, const OutputMap& output,
+                          const Eigen::MatrixBase<DX>& x, const Eigen::MatrixBase<DU>& u) {
   const int n = config.system.state_size(), m = config.system.action_size();
   DIFFDYN_CHECK(x.size() == n && u.size() == m, LearnedKindName(config.type), ": Predict got x of ",
                 x.size(), " and u of ", u.size(), " entries, expected ", n, " and ", m);
@@ -383,16 +470,59 @@ VectorX<R> PredictLearned(const Mlp<P>& net, const LearnedModelConfig& config,
   for (int i = 0; i < m; ++i) z[n + i] = R(u[i]);
   VectorX<R> out(n);
   if (IsNeuralOde(config.type)) {
-    const MlpOdeFunction<P> f{&net, &features};
+    const MlpOdeFunction<P> f{&net, &features, &output};
     Integrate(f, z, 0.0, 1.0, config.ode_options());
     out = z.head(n);
   } else {
-    out = net(features(z));
+    out = output(VectorX<R>(net(features(z))));
   }
   if (IsResidual(config.type)) {
     for (int i = 0; i < n; ++i) out[i] += R(x[i]);
   }
   return out;
+}
+
+/// The scaling that puts a model's network inputs (and, but for res-node, outputs) on
+/// unit scale for the transitions (states, actions, next) (n x N, m x N, n x N, N >= 1):
+/// the input shift and scale are the mean and standard deviation of phi([x; u]); the
+/// output's those of what the network must produce: x_{t+1} (abs-nn), x_{t+1} - x_t
+/// (res-nn, and abs-node's flow over unit time: its field's mean); the action part of
+/// a NeuralODE's output keeps shift 0 and scale 1. res-node gets no output scaling: its
+/// flow must carry z from x_t to x_{t+1} - x_t, so its field is no constant rate, and
+/// scaling it by the moments of x_{t+1} - 2 x_t made it worse than no scaling on the
+/// cart-pole (README, "Dynamics models"). A standard deviation below 1e-8 (1 + |mean|)
+/// (a constant) becomes 1.
+inline Scaling FitScaling(const LearnedModelConfig& config, const Eigen::Ref<const Eigen::MatrixXd>& states,
+                          const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                          const Eigen::Ref<const Eigen::MatrixXd>& next) {
+  const int n = config.system.state_size(), m = config.system.action_size();
+  DIFFDYN_CHECK(states.rows() == n && actions.rows() == m && next.rows() == n && states.cols() >= 1 &&
+                    actions.cols() == states.cols() && next.cols() == states.cols(),
+                "FitScaling: expected states n x N, actions m x N, next n x N with N >= 1");
+  // Mean and standard deviation of each row.
+  const auto moments = [](const Eigen::MatrixXd& v, Eigen::VectorXd& mean, Eigen::VectorXd& sd) {
+    mean = v.rowwise().mean();
+    sd = ((v.colwise() - mean).array().square().rowwise().sum() / static_cast<double>(v.cols())).sqrt();
+    for (Eigen::Index r = 0; r < sd.size(); ++r) {
+      if (!(sd[r] >= 1e-8 * (1.0 + std::abs(mean[r])))) sd[r] = 1.0;
+    }
+  };
+  Scaling scaling;
+  Eigen::MatrixXd z(n + m, states.cols()), phi;
+  z.topRows(n) = states;
+  z.bottomRows(m) = actions;
+  FeatureMap(config.system).Apply(z, phi);
+  moments(phi, scaling.input_shift, scaling.input_scale);
+  if (config.type == LearnedKind::kResNode) return scaling;
+  const Eigen::MatrixXd target = config.type == LearnedKind::kAbsNn ? next : next - states;
+  Eigen::VectorXd mean, sd;
+  moments(target, mean, sd);
+  const int outputs = IsNeuralOde(config.type) ? n + m : n;
+  scaling.output_shift = Eigen::VectorXd::Zero(outputs);
+  scaling.output_scale = Eigen::VectorXd::Ones(outputs);
+  scaling.output_shift.head(n) = mean;
+  scaling.output_scale.head(n) = sd;
+  return scaling;
 }
 
 /// Scratch and tape of one LearnedModel for batches up to a size, one per thread
@@ -425,7 +555,8 @@ class LearnedModel final : public DifferentiableTransitionModel {
  public:
   /// A model with the given MLP, whose architecture must equal config.Architecture().
   LearnedModel(const LearnedModelConfig& config, Mlp<double> net)
-      : config_(config), net_(std::move(net)), features_(config_.system) {
+      : config_(config), net_(std::move(net)), features_(config_.system, config_.scaling),
+        output_(config_.scaling) {
     config_.Validate();
     DIFFDYN_CHECK(net_.architecture() == config_.Architecture(), LearnedKindName(config.type),
                   ": the network architecture does not match the configuration");
@@ -450,6 +581,13 @@ class LearnedModel final : public DifferentiableTransitionModel {
   int state_size() const override { return config_.system.state_size(); }
   int action_size() const override { return config_.system.action_size(); }
   std::string kind() const override { return LearnedKindName(config_.type); }
+  /// The data's sample interval (s) recorded with the model, or 0.
+  double time_step() const override { return time_step_; }
+  /// Records the sample interval of the training data (s, >= 0, finite).
+  void set_time_step(double dt) {
+    DIFFDYN_CHECK(dt >= 0 && std::isfinite(dt), "time step must be >= 0 and finite, got ", dt);
+    time_step_ = dt;
+  }
   SystemDescription description() const override { return config_.system; }
 
   std::unique_ptr<TransitionWorkspace> MakeWorkspace(int max_batch) const override {
@@ -495,6 +633,7 @@ class LearnedModel final : public DifferentiableTransitionModel {
       // Adjoint seed dL/dz(1) = [gbar; 0]; dL/dx_t = top rows of dL/dz(0).
       ws.system.net = &net_;
       ws.system.features = &features_;
+      ws.system.output = &output_;
       ws.system.cache = &ws.cache;
       Eigen::MatrixXd& seed = ws.dl_dz[1];
       seed.topRows(n) = dl_dnext;
@@ -503,6 +642,7 @@ class LearnedModel final : public DifferentiableTransitionModel {
     } else {
       static const Eigen::MatrixXd kNone;
       ws.cotangent = dl_dnext;
+      output_.Pullback(ws.cotangent);
       net_.Backward(ws.cotangent, kNone, &ws.grad_params, &ws.grad_input, &ws.mlp);
       // dL/d[x; u] from dL/dphi.
       if (!features_.identity()) {
@@ -523,11 +663,13 @@ class LearnedModel final : public DifferentiableTransitionModel {
   template <typename DX, typename DU>
   VectorX<typename DX::Scalar> Predict(const Eigen::MatrixBase<DX>& x,
                                        const Eigen::MatrixBase<DU>& u) const {
-    return PredictLearned(net_, config_, features_, x, u);
+    return PredictLearned(net_, config_, features_, output_, x, u);
   }
 
   /// The feature map phi of the model's system.
   const FeatureMap& features() const { return features_; }
+  /// The network's output map.
+  const OutputMap& output_map() const { return output_; }
 
  private:
   LearnedWorkspace& Cast(TransitionWorkspace& ws) const {
@@ -540,6 +682,7 @@ class LearnedModel final : public DifferentiableTransitionModel {
   void Prepare(int b, LearnedWorkspace& ws) const {
     ws.system.net = &net_;
     ws.system.features = &features_;
+    ws.system.output = &output_;
     ws.system.cache = &ws.cache;
     if (IsNeuralOde(config_.type)) {
       if (!ws.solver) {
@@ -578,6 +721,7 @@ class LearnedModel final : public DifferentiableTransitionModel {
       } else {
         net_.Evaluate(input, next, &ws.mlp);
       }
+      output_.Apply(next);
     }
     if (IsResidual(config_.type)) next += states;
     ws.taped = tape;
@@ -586,6 +730,8 @@ class LearnedModel final : public DifferentiableTransitionModel {
   LearnedModelConfig config_;
   Mlp<double> net_;
   FeatureMap features_;
+  OutputMap output_;
+  double time_step_ = 0.0;
 };
 
 // -----------------------------------------------------------------------------
@@ -594,11 +740,18 @@ class LearnedModel final : public DifferentiableTransitionModel {
 /// The "architecture" object of a learned model file:
 /// {"mlp": {sizes, activations}, "hidden": h, "solver": name, "steps": N, "tolerance": tol}.
 inline nlohmann::json LearnedArchitectureToJson(const LearnedModelConfig& config) {
-  return {{"mlp", MlpArchitectureToJson(config.Architecture())},
-          {"hidden", config.hidden},
-          {"solver", MethodName(config.method)},
-          {"steps", config.steps},
-          {"tolerance", config.tolerance}};
+  nlohmann::json j = {{"mlp", MlpArchitectureToJson(config.Architecture())},
+                      {"hidden", config.hidden},
+                      {"solver", MethodName(config.method)},
+                      {"steps", config.steps},
+                      {"tolerance", config.tolerance}};
+  const auto list = [](const Eigen::VectorXd& v) { return std::vector<double>(v.data(), v.data() + v.size()); };
+  const Scaling& s = config.scaling;
+  if (s.has_input() || s.has_output()) {
+    j["scaling"] = {{"input_shift", list(s.input_shift)}, {"input_scale", list(s.input_scale)},
+                    {"output_shift", list(s.output_shift)}, {"output_scale", list(s.output_scale)}};
+  }
+  return j;
 }
 
 /// Inverse of LearnedArchitectureToJson for a file of `kind` whose system is
@@ -622,6 +775,21 @@ inline LearnedModelConfig LearnedConfigFromJson(const std::string& kind, const n
   config.method = ParseMethod(j["solver"].get<std::string>(), "architecture: solver");
   config.steps = j["steps"].get<int>();
   config.tolerance = j["tolerance"].get<double>();
+  if (j.contains("scaling")) {
+    const nlohmann::json& sc = j["scaling"];
+    const auto numbers = [&](const char* key) {
+      DIFFDYN_CHECK(sc.is_object() && sc.contains(key) && sc[key].is_array(), "architecture: scaling: '",
+                    key, "' must be a list of numbers");
+      Eigen::VectorXd v(static_cast<Eigen::Index>(sc[key].size()));
+      for (std::size_t i = 0; i < sc[key].size(); ++i) {
+        DIFFDYN_CHECK(sc[key][i].is_number(), "architecture: scaling: '", key, "' must hold numbers");
+        v[static_cast<Eigen::Index>(i)] = sc[key][i].get<double>();
+      }
+      return v;
+    };
+    config.scaling = {numbers("input_shift"), numbers("input_scale"), numbers("output_shift"),
+                      numbers("output_scale")};
+  }
   config.Validate();
   const MlpArchitecture mlp = MlpArchitectureFromJson(field("mlp"));
   if (!mlp.activations.empty()) config.activation = mlp.activations.front();
@@ -680,6 +848,9 @@ inline LearnedModel LoadLearnedModel(const std::filesystem::path& path,
     throw Error(StrCat(path.string(), ": ", e.what()));
   }
   LearnedModel model(config, Mlp<double>(config.Architecture(), file.parameters));
+  // The training data's sample interval, where the file records it (diffdyn train does).
+  const nlohmann::json& dt = file.provenance.contains("dt") ? file.provenance["dt"] : nlohmann::json();
+  if (dt.is_number() && std::isfinite(dt.get<double>()) && dt.get<double>() > 0) model.set_time_step(dt.get<double>());
   if (contents) *contents = std::move(file);
   return model;
 }

@@ -57,6 +57,9 @@ class TransitionModel {
   virtual int action_size() const = 0;
   /// The model-file kind ("abs-nn", "res-node", "oracle", ...).
   virtual std::string kind() const = 0;
+  /// The time (s) one transition spans, or 0 where the model does not record it
+  /// (a model trained on data without time, e.g. pushes).
+  virtual double time_step() const { return 0.0; }
   /// What its states and actions are; the default names them x1..xn and u1..um.
   virtual SystemDescription description() const {
     return SystemDescription::Unnamed(state_size(), action_size());

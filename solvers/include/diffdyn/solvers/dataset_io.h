@@ -33,11 +33,11 @@ namespace diffdyn {
 struct JointLayout {
   /// 1-based joints whose torque is part of the action; empty = the joints whose
   /// torque is not zero throughout the data (every joint if all are zero).
-  std::vector<int> actuated;
+  std::vector<int> actuated{};
   /// Every joint's torque is part of the action (overrides `actuated`).
   bool all_actuated = false;
   /// 1-based joints that are prismatic (not angles); empty = every joint revolute.
-  std::vector<int> prismatic;
+  std::vector<int> prismatic{};
   /// How learned models see the angles.
   AngleFeatures angle_features = AngleFeatures::kSinCos;
   /// The description's label.

@@ -42,7 +42,7 @@ struct JointCollectOptions {
   std::uint64_t seed = 0;
   int threads = 1;
   /// Called with the number of finished trajectories (from the calling thread).
-  std::function<void(int)> progress;
+  std::function<void(int)> progress{};
 };
 
 /// The dataset of `task` (file comment): states (q, qd), actions the actuated

@@ -80,6 +80,12 @@ Windows MakeWindows(const Dataset& data, int horizon);
 /// The windows `index` of `data`, in that order.
 Windows SelectWindows(const Windows& data, std::span<const int> index);
 
+/// The trainer's seeded split of N windows: a shuffled permutation drawn from
+/// Rng(seed), its first round(val_fraction N) entries held out for validation, the
+/// rest for training (both in shuffled order).
+void SplitWindows(int n, double val_fraction, std::uint64_t seed, std::vector<int>* train,
+                  std::vector<int>* val);
+
 /// Throws diffdyn::Error (naming `what`) unless `model` takes the states and actions
 /// of `system` (same n and m).
 void CheckModelFits(const TransitionModel& model, const SystemDescription& system,
