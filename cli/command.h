@@ -48,5 +48,6 @@ void RegisterCollectCommand(CLI::App& app);
 void RegisterTrainCommand(CLI::App& app);
 void RegisterEvalCommand(CLI::App& app);
 void RegisterPushCommand(CLI::App& app);
+void RegisterControlCommand(CLI::App& app);
 
 }  // namespace diffdyn::cli

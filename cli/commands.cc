@@ -5,6 +5,7 @@ namespace diffdyn::cli {
 
 void RegisterCommands(CLI::App& app) {
   RegisterCollectCommand(app);
+  RegisterControlCommand(app);
   RegisterDemoCommand(app);
   RegisterDiagnoseCommand(app);
   RegisterEvalCommand(app);

@@ -42,6 +42,7 @@
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/jacobian.h"  // VectorX<T>
+#include "diffdyn/models/continuous_model.h"
 #include "diffdyn/models/system_description.h"
 
 namespace diffdyn {
@@ -95,6 +96,17 @@ class AnalyticModel {
   virtual VectorX<DiagJet> TipLoad(const VectorX<DiagJet>& q, const VectorX<DiagJet>& qd,
                                    const VectorX<DiagJet>& qdd,
                                    const VectorX<DiagJet>& p) const = 0;
+
+  /// The model as a transition model of x = (q, qd) over options.dt
+  /// (continuous_model.h): AnalyticDynamics (below) with parameters p, the `actuated`
+  /// joints (0-based; empty: all) and viscous `damping` (n entries or empty), on
+  /// `system` (2n states, one action per actuated joint). Batched on double without
+  /// virtual calls per step. Throws diffdyn::Error for bad sizes or options.
+  virtual std::unique_ptr<TransitionModel> MakeTransitionModel(const Eigen::VectorXd& p,
+                                                               std::vector<int> actuated,
+                                                               Eigen::VectorXd damping,
+                                                               SystemDescription system,
+                                                               const ContinuousOptions& options) const = 0;
 
   /// The default parameter vector p (size param_specs().size()).
   Eigen::VectorXd DefaultParams() const {
@@ -175,17 +187,32 @@ class AnalyticModelAdapter final : public AnalyticModel {
     return Model::template TipLoad<DiagJet>(q, qd, qdd, p);
   }
 
+  std::unique_ptr<TransitionModel> MakeTransitionModel(const Eigen::VectorXd& p,
+                                                       std::vector<int> actuated,
+                                                       Eigen::VectorXd damping,
+                                                       SystemDescription system,
+                                                       const ContinuousOptions& options) const override;
+
  private:
   std::vector<ParamSpec> specs_;
 };
 
 /// The manipulator equation of a compile-time analytic model (a struct as in
 /// simple_models.h) as continuous dynamics for ContinuousTransitionModel
-/// (continuous_model.h), on any scalar: x = (q, qd) (2n), u = tau (n), theta = p,
+/// (continuous_model.h), on any scalar: x = (q, qd) (2n), theta = p, u the torques of
+/// the joints in `actuated` (a entries; empty: every joint, a = n),
 ///
-///   dx/dt = (qd, M(q)^{-1} (tau - ID(q, qd, 0))),   M(q) e_i = ID(q, 0, e_i) - ID(q, 0, 0).
+///   dx/dt = (qd, M(q)^{-1} (B u - ID(q, qd, 0) - D qd)),   M(q) e_i = ID(q, 0, e_i) - ID(q, 0, 0),
+///
+/// B the n x a selection of the actuated joints, D = diag(damping) the viscous joint
+/// friction (n entries; empty: none).
 template <typename Model>
 struct AnalyticDynamics {
+  /// 0-based joints driven by u's entries, increasing; empty: all.
+  std::vector<int> actuated{};
+  /// Viscous friction coefficient of each joint (n), or empty.
+  Eigen::VectorXd damping{};
+
   template <typename T>
   void operator()(const VectorX<T>& x, const VectorX<T>& u, const VectorX<T>& theta, double,
                   VectorX<T>& dxdt) const {
@@ -199,12 +226,36 @@ struct AnalyticDynamics {
       e[i] = T(1.0);
       mass.col(i) = Model::template InverseDynamics<T>(q, zero, e, theta) - gravity;
     }
-    const VectorX<T> bias = Model::template InverseDynamics<T>(q, qd, zero, theta);
+    VectorX<T> force = -Model::template InverseDynamics<T>(q, qd, zero, theta);
+    if (actuated.empty()) {
+      force += u;
+    } else {
+      for (std::size_t k = 0; k < actuated.size(); ++k) force[actuated[k]] += u[static_cast<Eigen::Index>(k)];
+    }
+    for (Eigen::Index j = 0; j < damping.size(); ++j) force[j] -= damping[j] * qd[j];
     dxdt.resize(2 * n);
     dxdt.head(n) = qd;
-    dxdt.tail(n) = mass.llt().solve(u - bias);
+    dxdt.tail(n) = mass.llt().solve(force);
   }
 };
+
+template <typename Model>
+std::unique_ptr<TransitionModel> AnalyticModelAdapter<Model>::MakeTransitionModel(
+    const Eigen::VectorXd& p, std::vector<int> actuated, Eigen::VectorXd damping,
+    SystemDescription system, const ContinuousOptions& options) const {
+  const int n = Model::kDof;
+  DIFFDYN_CHECK(p.size() == static_cast<Eigen::Index>(specs_.size()), Model::kName, ": ", specs_.size(),
+                " parameters expected, got ", p.size());
+  DIFFDYN_CHECK(damping.size() == 0 || damping.size() == n, Model::kName, ": damping needs ", n,
+                " entries, got ", damping.size());
+  for (int j : actuated) DIFFDYN_CHECK(j >= 0 && j < n, Model::kName, ": no joint ", j + 1);
+  const int a = actuated.empty() ? n : static_cast<int>(actuated.size());
+  DIFFDYN_CHECK(system.state_size() == 2 * n && system.action_size() == a, Model::kName,
+                ": the system must have ", 2 * n, " states and ", a, " actions");
+  return std::make_unique<ContinuousTransitionModel<AnalyticDynamics<Model>>>(
+      AnalyticDynamics<Model>{std::move(actuated), std::move(damping)}, std::move(system), p, options,
+      Model::kName);
+}
 
 /// The state (q1..qn, qd1..qdn) and action (tau1..taun) of an analytic model with n
 /// joints; revolute joints' q are angles, seen as sin/cos by learned models.

@@ -103,6 +103,15 @@ struct JointTask {
   }
 };
 
+/// The vector of `values` (copied one by one: g++ 12 warns about Eigen's vector loads
+/// from a Map over a short initializer list).
+inline Eigen::VectorXd VectorOf(std::initializer_list<double> values) {
+  Eigen::VectorXd v(static_cast<Eigen::Index>(values.size()));
+  Eigen::Index i = 0;
+  for (double x : values) v[i++] = x;
+  return v;
+}
+
 /// The task names, in the table's order.
 inline std::vector<std::string> JointTaskNames() {
   return {"pendulum", "cartpole", "double-pendulum", "arm2", "panda"};
@@ -115,8 +124,8 @@ inline JointTask JointTaskByName(const std::string& name) {
   t.name = name;
   t.model = name;
   auto domain = [&t](std::initializer_list<double> low, std::initializer_list<double> high) {
-    t.start_low = Eigen::Map<const Eigen::VectorXd>(low.begin(), static_cast<Eigen::Index>(low.size()));
-    t.start_high = Eigen::Map<const Eigen::VectorXd>(high.begin(), static_cast<Eigen::Index>(high.size()));
+    t.start_low = VectorOf(low);
+    t.start_high = VectorOf(high);
   };
   if (name == "pendulum") {
     t.params = {"m=0.75", "l=0.6666666666666666", "g=9.81"};

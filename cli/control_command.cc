@@ -1,0 +1,185 @@
+// diffdyn control: a controller on a control task, from seeded starts.
+//
+//   diffdyn control --system pendulum --controller mppi [--model M] --starts 20 --seed 1
+//                   [--samples 1000] [--horizon 1.0] [--dt 0.04] [--out DIR] [--json]
+//
+// The task (physics/control_task.h) gives the plant, the cost, the success test and
+// the start distribution; the evaluator (solvers/control.h) runs the controller on
+// the plant and measures every start the same way. M is what the controller plans
+// with: by default, or when it names the task's system, the task's own analytic
+// model on steps of --dt seconds; otherwise anything LoadTransitionModel opens
+// (a learned model file, whose time step is its data's sample interval, or an
+// extended-physics file, integrated over --dt). The model's step must be a whole
+// multiple of the 8-ms control period (else exit 2).
+//
+// --out DIR writes DIR/starts.csv (start,x0_1..x0_n,success,cost,max_abs_u,seconds)
+// and DIR/trajectories/start_<s>.csv (t, the states, the actions held from t).
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <fmt/core.h>
+
+#include "command.h"
+#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/autodiff_ode/progress.h"
+#include "diffdyn/physics/control_task.h"
+#include "diffdyn/solvers/control.h"
+#include "diffdyn/solvers/load_model.h"
+#include "diffdyn/solvers/pushing_trials.h"
+
+namespace diffdyn::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct ControlCommandOptions {
+  CommonOptions common;
+  std::string system = "pendulum";
+  std::string controller = "mppi";
+  std::string model;
+  int starts = 20;
+  double dt = 0.04;
+  MppiControlOptions mppi;
+  std::string out;
+};
+
+// The model the controller plans with (file comment).
+std::unique_ptr<TransitionModel> PlanningModel(const ControlCommandOptions& o, const ControlTask& task) {
+  DIFFDYN_CHECK(o.dt > 0 && o.dt <= 1.0, "--dt must be in (0, 1] s, got ", o.dt);
+  PeriodsPerStep(o.dt, task.period, "--dt");
+  if (o.model.empty() || o.model == o.system) return TaskModel(task, o.dt, 1);
+  return LoadTransitionModel(o.model, {.dt = o.dt, .method = Method::kRk4Classic, .substeps = 1});
+}
+
+// The value below which a fraction p of the sorted values lie (nearest rank).
+double Percentile(std::vector<double> v, double p) {
+  std::sort(v.begin(), v.end());
+  const auto rank = static_cast<std::size_t>(std::ceil(p * static_cast<double>(v.size())));
+  return v[std::min(v.size() - 1, rank == 0 ? 0 : rank - 1)];
+}
+
+void WriteStarts(const fs::path& path, const std::vector<ControlRun>& runs) {
+  WriteFileAtomically(path, [&](std::ostream& out) {
+    out << "start";
+    for (Eigen::Index i = 0; i < runs.front().x0.size(); ++i) out << ",x0_" << i + 1;
+    out << ",success,cost,max_abs_u,seconds\n";
+    for (std::size_t s = 0; s < runs.size(); ++s) {
+      out << s;
+      for (double v : runs[s].x0) out << ',' << fmt::format("{}", v);
+      out << ',' << (runs[s].success ? 1 : 0) << ',' << fmt::format("{},{},{}", runs[s].cost, runs[s].max_abs_u,
+                                                                     runs[s].seconds)
+          << '\n';
+    }
+  });
+}
+
+void WriteTrajectory(const fs::path& path, const Trajectory& tr, const SystemDescription& system) {
+  WriteFileAtomically(path, [&](std::ostream& out) {
+    out << 't';
+    for (const std::string& name : system.state_names) out << ',' << name;
+    for (const std::string& name : system.action_names) out << ',' << name;
+    out << '\n';
+    for (Eigen::Index k = 0; k < tr.t.size(); ++k) {
+      out << fmt::format("{}", tr.t[k]);
+      for (Eigen::Index i = 0; i < tr.states.rows(); ++i) out << ',' << fmt::format("{}", tr.states(i, k));
+      for (Eigen::Index i = 0; i < tr.actions.rows(); ++i) {
+        out << ',';
+        if (k < tr.actions.cols()) out << fmt::format("{}", tr.actions(i, k));
+      }
+      out << '\n';
+    }
+  });
+}
+
+void RunControl(const ControlCommandOptions& o) {
+  // Validate everything before anything is written.
+  const ControlTask task = ControlTaskByName(o.system);
+  DIFFDYN_CHECK(o.starts >= 1 && o.starts <= 100000, "--starts must be in [1, 100000], got ", o.starts);
+  const std::unique_ptr<TransitionModel> model = PlanningModel(o, task);
+  MppiController controller(task, *model, o.mppi);
+  if (!o.out.empty()) {
+    std::error_code ec;
+    fs::create_directories(fs::path(o.out) / "trajectories", ec);
+    DIFFDYN_CHECK(!ec, "--out ", o.out, ": cannot create the folder: ", ec.message());
+  }
+
+  ProgressBar bar("control", o.starts, !o.common.quiet);
+  const std::vector<ControlRun> runs = EvaluateController(
+      task, controller, {.starts = o.starts, .seed = o.common.seed, .progress = [&](int done) { bar.Update(done); }});
+  bar.Finish();
+
+  int successes = 0;
+  double max_abs_u = 0.0, cost_sum = 0.0;
+  std::vector<double> costs, command_ms;
+  for (const ControlRun& r : runs) {
+    successes += r.success ? 1 : 0;
+    max_abs_u = std::max(max_abs_u, r.max_abs_u);
+    cost_sum += r.cost;
+    costs.push_back(r.cost);
+    command_ms.insert(command_ms.end(), r.command_ms.begin(), r.command_ms.end());
+  }
+  const auto [low, high] = WilsonInterval(successes, o.starts);
+  if (!o.out.empty()) {
+    WriteStarts(fs::path(o.out) / "starts.csv", runs);
+    for (std::size_t s = 0; s < runs.size(); ++s) {
+      WriteTrajectory(fs::path(o.out) / "trajectories" / fmt::format("start_{}.csv", s), runs[s].trajectory,
+                      task.plant.System());
+    }
+  }
+  const double rate = static_cast<double>(successes) / o.starts;
+  const double ms = Percentile(command_ms, 0.5);
+  if (o.common.json) {
+    PrintJson({{"system", o.system},           {"controller", o.controller},
+               {"starts", o.starts},           {"successes", successes},
+               {"success_rate", rate},         {"ci95_low", low},
+               {"ci95_high", high},            {"mean_cost", cost_sum / o.starts},
+               {"median_cost", Percentile(costs, 0.5)}, {"p90_cost", Percentile(costs, 0.9)},
+               {"max_abs_u", max_abs_u},       {"ms_per_command", ms},
+               {"model", o.model.empty() ? o.system : o.model}, {"model_kind", model->kind()},
+               {"hold", controller.hold()},    {"seed", o.common.seed}});
+    return;
+  }
+  fmt::print("{} on the {} task with {} ({}), {} starts: success {}/{} = {:.0f} % (95 % interval {:.0f}-{:.0f} %)\n",
+             o.controller, o.system, o.model.empty() ? o.system : o.model, model->kind(), o.starts, successes,
+             o.starts, 100 * rate, 100 * low, 100 * high);
+  fmt::print("cost mean {:.2f}, median {:.2f}, 90th percentile {:.2f}; max |u| {:.3f}; {:.2f} ms per command "
+             "(median), action held {} period(s)\n",
+             cost_sum / o.starts, Percentile(costs, 0.5), Percentile(costs, 0.9), max_abs_u, ms, controller.hold());
+}
+
+}  // namespace
+
+void RegisterControlCommand(CLI::App& app) {
+  auto o = std::make_shared<ControlCommandOptions>();
+  CLI::App* command = app.add_subcommand("control", "Run a controller on a control task from seeded starts");
+  AddCommonOptions(command, o->common);
+  command->add_option("--system", o->system, "Control task: pendulum (swing-up) or cartpole (swing-up)")
+      ->capture_default_str();
+  command->add_option("--controller", o->controller, "Controller: mppi")
+      ->check(CLI::IsMember({"mppi"}))
+      ->capture_default_str();
+  command->add_option("--model", o->model,
+                      "Model to plan with: a model file, or the task's system name (default: the task's analytic model)");
+  command->add_option("--starts", o->starts, "Seeded start states, 1 to 100000")->capture_default_str();
+  command->add_option("--dt", o->dt, "Planning step (s) of analytic and extended-physics models, a multiple of 8 ms")
+      ->capture_default_str();
+  command->add_option("--samples", o->mppi.samples, "MPPI samples K")->capture_default_str();
+  command->add_option("--horizon", o->mppi.horizon_seconds, "MPPI horizon (s)")->capture_default_str();
+  command->add_option("--lambda", o->mppi.lambda, "MPPI temperature")->capture_default_str();
+  command->add_option("--noise", o->mppi.noise_fraction, "MPPI noise standard deviation / action bound")
+      ->capture_default_str();
+  command->add_option("--terminal", o->mppi.terminal_seconds,
+                      "MPPI terminal cost: the state cost at the horizon's end held for this long (s)")
+      ->capture_default_str();
+  command->add_option("--threads", o->mppi.threads, "Threads, >= 0 (0: all cores; results do not depend on it)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  command->add_option("--out", o->out, "Folder for starts.csv and trajectories/");
+  command->callback([o] { RunControl(*o); });
+}
+
+}  // namespace diffdyn::cli

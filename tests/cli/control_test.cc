@@ -1,0 +1,79 @@
+// diffdyn control: the JSON keys and files of DESIGN.md, a learned model whose
+// step is its data's interval, and one-line errors (exit 2) with nothing written.
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "run_diffdyn.h"
+
+namespace diffdyn {
+namespace {
+
+using testing::CountLines;
+using testing::RunDiffdyn;
+using testing::TempPath;
+
+TEST(Control, PendulumMppiWritesTheContractsKeysAndFiles) {
+  const std::string out = TempPath("control_pendulum");
+  std::filesystem::remove_all(out);
+  const auto r = RunDiffdyn("control --system pendulum --controller mppi --starts 2 --samples 300 --seed 3 --quiet "
+                            "--json --out " + out);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  ASSERT_EQ(CountLines(r.out), 1) << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  for (const char* key : {"system", "controller", "starts", "successes", "success_rate", "ci95_low", "ci95_high",
+                          "mean_cost", "median_cost", "p90_cost", "max_abs_u", "ms_per_command"}) {
+    EXPECT_TRUE(j.contains(key)) << key;
+  }
+  EXPECT_TRUE(j["starts"].is_number_integer());
+  EXPECT_TRUE(j["successes"].is_number_integer());
+  EXPECT_EQ(j["starts"].get<int>(), 2);
+  EXPECT_LE(j["max_abs_u"].get<double>(), 2.5);
+  EXPECT_LE(j["ci95_low"].get<double>(), j["success_rate"].get<double>());
+  std::ifstream starts(out + "/starts.csv");
+  std::string header;
+  std::getline(starts, header);
+  EXPECT_EQ(header, "start,x0_1,x0_2,success,cost,max_abs_u,seconds");
+  EXPECT_EQ(CountLines(std::string(std::istreambuf_iterator<char>(starts), {})), 2);
+  EXPECT_TRUE(std::filesystem::is_regular_file(out + "/trajectories/start_1.csv"));
+}
+
+TEST(Control, PlansWithALearnedModelAtItsDataInterval) {
+  const std::string data = TempPath("control_pendulum_data.csv"), model = TempPath("control_pendulum_model.json");
+  ASSERT_EQ(RunDiffdyn("collect --system pendulum --trajectories 4 --seconds 1 --seed 1 --quiet --out " + data).exit_code, 0);
+  ASSERT_EQ(RunDiffdyn("train --data " + data + " --model abs-nn --hidden 8 --epochs 1 --quiet --out " + model).exit_code, 0);
+  const auto r = RunDiffdyn("control --system pendulum --model " + model + " --starts 1 --samples 50 --quiet --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(nlohmann::json::parse(r.out)["hold"].get<int>(), 5);  // 40 ms = 5 periods
+}
+
+TEST(Control, BadOptionsAreOneLineErrorsAndWriteNothing) {
+  const std::string out = TempPath("control_bad");
+  for (const auto& [args, fragment] : std::vector<std::pair<std::string, std::string>>{
+           {"--system robot", "--system"},
+           {"--system pushing", "--system"},
+           {"--dt 0.01", "--dt"},
+           {"--dt -1", "--dt"},
+           {"--starts 0", "--starts"},
+           {"--samples 0", "--samples"},
+           {"--horizon 0", "--horizon"},
+           {"--lambda nan", "--lambda"},
+           {"--controller lqr", "--controller"},
+           {"--model cartpole", "--model"},
+           {"--model /no/such/model.json", "--model"}}) {
+    std::filesystem::remove_all(out);
+    const std::string starts = args.find("--starts") == std::string::npos ? " --starts 1" : "";
+    const auto r = RunDiffdyn("control " + args + starts + " --quiet --out " + out);
+    EXPECT_EQ(r.exit_code, 2) << args << ": " << r.err;
+    EXPECT_EQ(CountLines(r.err), 1) << r.err;
+    EXPECT_NE(r.err.find(fragment), std::string::npos) << args << ": " << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out)) << args;
+  }
+}
+
+}  // namespace
+}  // namespace diffdyn
