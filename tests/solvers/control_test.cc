@@ -5,14 +5,11 @@
 #include "diffdyn/solvers/control.h"
 
 #include <cmath>
-#include <numbers>
 
 #include <gtest/gtest.h>
 
 namespace diffdyn {
 namespace {
-
-constexpr double kPi = std::numbers::pi;
 
 // Returns a constant action, counts its calls.
 class ConstantController final : public Controller {
