@@ -2,6 +2,9 @@
 #   make demo        install missing dependencies, build, run the main job
 #   make test        install missing dependencies, build, run every test
 #   make test-quick  the same with the tests labelled `quick` only
+#   make test-asan   clang++ ASan + UBSan build (preset debug-asan, build-asan/),
+#                    the tests labelled `quick`
+#   make fuzz-quick  the same build, each libFuzzer target for 12 s (fuzz/README.md)
 #   make bench       benchmarks side by side with the PyTorch reference
 # Variables: BUILD_DIR (build), BUILD_TYPE (Release), NATIVE (ON: -march=native;
 # OFF: the x86-64 baseline, for binaries that run on other machines), STRICT (OFF;
@@ -15,7 +18,7 @@ CXX_COMPILER ?=
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 
-.PHONY: all deps configure build test test-quick demo bench clean
+.PHONY: all deps configure build test test-quick test-asan fuzz-quick demo bench clean
 
 all: build
 
@@ -35,6 +38,18 @@ test: build
 
 test-quick: build
 	@cd $(BUILD_DIR) && ctest -j $(JOBS) --output-on-failure --timeout 900 -L quick
+
+test-asan:
+	@scripts/install-deps --ci
+	@cmake --preset debug-asan >/dev/null
+	@cmake --build --preset debug-asan -j $(JOBS)
+	@ctest --preset debug-asan -j $(JOBS)
+
+fuzz-quick:
+	@scripts/install-deps --ci
+	@cmake --preset debug-asan >/dev/null
+	@cmake --build --preset debug-asan -j $(JOBS) --target fuzz_dataset fuzz_measured fuzz_model_file fuzz_params
+	@ctest --test-dir build-asan -L fuzz -j $(JOBS) --output-on-failure
 
 demo: build
 	@$(BUILD_DIR)/cli/diffdyn demo --out demo-output

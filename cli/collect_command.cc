@@ -172,10 +172,13 @@ void RegisterCollectCommand(CLI::App& app) {
   command->add_option("--system", args->system,
                       "pushing, or a joint-space system: pendulum, cartpole, double-pendulum, arm2, panda")
       ->capture_default_str();
-  command->add_option("--trajectories", args->trajectories, "Number of trajectories")->capture_default_str();
+  command->add_option("--trajectories", args->trajectories, "Number of trajectories")
+      ->check(Bounded(1, 100000))->capture_default_str();
   CLI::Option* length = command->add_option("--length", args->length, "Pushing: pushes per trajectory")
+      ->check(Bounded(1, 10000))
                             ->capture_default_str();
   command->add_option("--threads", args->threads, "Worker threads (output does not depend on it)")
+      ->check(Bounded(1, 256))
       ->capture_default_str();
   CLI::Option* starts = command->add_option("--starts", args->starts,
                       "Pushing: start poses: seed = the seed's (0.4, 0, 0.2 pi); task = spread over the "
@@ -185,8 +188,10 @@ void RegisterCollectCommand(CLI::App& app) {
                       "Pushing: obstacle in the world: auto = only with --starts task")
       ->check(CLI::IsMember({"auto", "on", "off"}));
   CLI::Option* seconds = command->add_option("--seconds", args->seconds, "Joint space: seconds per trajectory")
+      ->check(Bounded(1e-3, 3600))
                              ->capture_default_str();
-  CLI::Option* dt = command->add_option("--dt", args->dt, "Joint space: sample interval (s)")->capture_default_str();
+  CLI::Option* dt = command->add_option("--dt", args->dt, "Joint space: sample interval (s)")
+      ->check(Bounded(1e-4, 10))->capture_default_str();
   CLI::Option* effect = command->add_option("--effect", args->effects,
                       "Joint space: add an effect KIND:JOINT=VALUE[,VALUE] to the simulated system "
                       "(repeatable; kinds of model_conventions.md, e.g. viscous:1=0.3)");
@@ -194,7 +199,8 @@ void RegisterCollectCommand(CLI::App& app) {
                       "Joint space: task = the task's actuated joints; all = excite every joint")
       ->check(CLI::IsMember({"task", "all"}))
       ->capture_default_str();
-  command->add_option("--out", args->out, "Output CSV (pushing or joint-space)")->required();
+  command->add_option("--out", args->out, "Output CSV (pushing or joint-space)")
+      ->check(OutputPath())->required();
   command->callback([args, length, starts, obstacle, seconds, dt, effect, actuated] {
     args->pushing_option_given = length->count() + starts->count() + obstacle->count() > 0;
     args->joint_option_given = seconds->count() + dt->count() + effect->count() + actuated->count() > 0;

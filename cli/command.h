@@ -28,10 +28,27 @@ struct CommonOptions {
   bool quiet = false;
 };
 
+/// Validator of a numeric option: a finite number in [lo, hi] (checked on the text
+/// before conversion, so integers never wrap and NaN is refused).
+CLI::Validator Bounded(double lo, double hi);
+
+/// Validator of an input path: an existing regular file (FIFOs, devices and
+/// sockets are refused), or with `allow_folder` also a folder.
+CLI::Validator InputPath(bool allow_folder = false);
+
+/// Validator of an output path: one that does not exist yet, or an existing
+/// regular file (or, with `folder`, an existing folder); never a device or FIFO.
+CLI::Validator OutputPath(bool folder = false);
+
+/// Throws diffdyn::Error if `output` (the value of option `output_option`) names
+/// the same file as `input`: no command overwrites its own input.
+void CheckDistinct(const std::string& input, const std::string& output_option, const std::string& output);
+
 /// Adds --seed, --json and --quiet to `command`, bound to `options`.
 void AddCommonOptions(CLI::App* command, CommonOptions& options);
 
-/// Prints `summary` as one line of JSON on stdout.
+/// Prints `summary` as one line of JSON on stdout. A non-finite number anywhere
+/// in it is a runtime failure (NumericalError naming the key), never printed.
 void PrintJson(const nlohmann::json& summary);
 
 /// Registers every subcommand on `app` (commands.cc).

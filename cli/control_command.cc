@@ -164,21 +164,29 @@ void RegisterControlCommand(CLI::App& app) {
       ->capture_default_str();
   command->add_option("--model", o->model,
                       "Model to plan with: a model file, or the task's system name (default: the task's analytic model)");
-  command->add_option("--starts", o->starts, "Seeded start states, 1 to 100000")->capture_default_str();
+  command->add_option("--starts", o->starts, "Seeded start states, 1 to 100000")
+      ->check(Bounded(1, 100000))->capture_default_str();
   command->add_option("--dt", o->dt, "Planning step (s) of analytic and extended-physics models, a multiple of 8 ms")
+      ->check(Bounded(1e-4, 1))
       ->capture_default_str();
-  command->add_option("--samples", o->mppi.samples, "MPPI samples K")->capture_default_str();
-  command->add_option("--horizon", o->mppi.horizon_seconds, "MPPI horizon (s)")->capture_default_str();
-  command->add_option("--lambda", o->mppi.lambda, "MPPI temperature")->capture_default_str();
+  command->add_option("--samples", o->mppi.samples, "MPPI samples K")
+      ->check(Bounded(1, 1e6))->capture_default_str();
+  command->add_option("--horizon", o->mppi.horizon_seconds, "MPPI horizon (s)")
+      ->check(Bounded(1e-3, 60))->capture_default_str();
+  command->add_option("--lambda", o->mppi.lambda, "MPPI temperature")
+      ->check(Bounded(1e-9, 1e9))->capture_default_str();
   command->add_option("--noise", o->mppi.noise_fraction, "MPPI noise standard deviation / action bound")
+      ->check(Bounded(0, 10))
       ->capture_default_str();
   command->add_option("--terminal", o->mppi.terminal_seconds,
                       "MPPI terminal cost: the state cost at the horizon's end held for this long (s)")
+      ->check(Bounded(0, 1e3))
       ->capture_default_str();
   command->add_option("--threads", o->mppi.threads, "Threads, >= 0 (0: all cores; results do not depend on it)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(Bounded(0, 256))
       ->capture_default_str();
-  command->add_option("--out", o->out, "Folder for starts.csv and trajectories/");
+  command->add_option("--out", o->out, "Folder for starts.csv and trajectories/")
+      ->check(OutputPath(true));
   command->callback([o] { RunControl(*o); });
 }
 

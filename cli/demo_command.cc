@@ -458,19 +458,28 @@ void RegisterDemoCommand(CLI::App& app) {
               "obstacle with MPPI, write a report");
   auto options = std::make_shared<DemoOptions>();
   AddCommonOptions(command, options->common);
-  command->add_option("--out", options->out, "Directory for the report, data, model and PNGs");
+  command->add_option("--out", options->out, "Directory for the report, data, model and PNGs")
+      ->check(OutputPath(true));
   command->add_flag("--quick", options->quick,
                     "A small run of every stage (used by the tests): 24 x 5 pushes, 3 epochs, "
                     "1 trial with K = 64, T = 5, 3 pushes, unless given");
-  command->add_option("--trajectories", options->trajectories, "Stage 1: trajectories to collect");
-  command->add_option("--length", options->length, "Stage 1: pushes per trajectory");
-  command->add_option("--epochs", options->epochs, "Stage 2: training epochs");
-  command->add_option("--trials", options->trials, "Stage 3: pushing trials");
-  command->add_option("--samples", options->samples, "Stage 3: MPPI samples K");
-  command->add_option("--horizon", options->horizon, "Stage 3: MPPI horizon T");
-  command->add_option("--max-steps", options->max_steps, "Stage 3: pushes per trial");
+  command->add_option("--trajectories", options->trajectories, "Stage 1: trajectories to collect")
+      ->check(Bounded(1, 100000));
+  command->add_option("--length", options->length, "Stage 1: pushes per trajectory")
+      ->check(Bounded(1, 10000));
+  command->add_option("--epochs", options->epochs, "Stage 2: training epochs")
+      ->check(Bounded(1, 1e6));
+  command->add_option("--trials", options->trials, "Stage 3: pushing trials")
+      ->check(Bounded(1, 10000));
+  command->add_option("--samples", options->samples, "Stage 3: MPPI samples K")
+      ->check(Bounded(1, 1e6));
+  command->add_option("--horizon", options->horizon, "Stage 3: MPPI horizon T")
+      ->check(Bounded(1, 1000));
+  command->add_option("--max-steps", options->max_steps, "Stage 3: pushes per trial")
+      ->check(Bounded(1, 10000));
   command->add_option("--threads", options->threads,
-                      "Threads (0: all cores; results do not depend on it)");
+                      "Threads (0: all cores; results do not depend on it)")
+      ->check(Bounded(0, 256));
   command->callback([options, command] {
     DemoOptions o = *options;
     if (o.quick) {

@@ -16,6 +16,7 @@
 
 #include "command.h"
 #include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/json_io.h"
 #include "diffdyn/physics/model_registry.h"
 #include "diffdyn/solvers/diagnosis.h"
 #include "diffdyn/solvers/extended_model_file.h"
@@ -42,25 +43,10 @@ struct DiagnoseOptions {
 Eigen::VectorXd ResolveParams(const AnalyticModel& model, const DiagnoseOptions& o) {
   Eigen::VectorXd p = model.DefaultParams();
   if (!o.params_file.empty()) {
-    std::ifstream in(o.params_file);
-    DIFFDYN_CHECK(in.good(), "--params ", o.params_file, ": cannot open");
-    nlohmann::json j;
     try {
-      in >> j;
-    } catch (const nlohmann::json::exception& e) {
-      throw Error(StrCat("--params ", o.params_file, ": not valid JSON: ", e.what()));
-    }
-    if (j.is_object() && j.contains("params")) j = j["params"];
-    DIFFDYN_CHECK(j.is_object(), "--params ", o.params_file, ": expected an object {name: value}");
-    std::vector<std::string> assignments;
-    for (const auto& [name, value] : j.items()) {
-      DIFFDYN_CHECK(value.is_number(), "--params ", o.params_file, ": '", name, "' is not a number");
-      assignments.push_back(StrCat(name, "=", value.get<double>()));
-    }
-    try {
-      p = ParseParams(model, assignments, p);
+      p = ReadParamsFile(model, o.params_file, p);
     } catch (const Error& e) {
-      throw Error(StrCat("--params ", o.params_file, ": ", e.what()));
+      throw Error(StrCat("--params ", e.what()));
     }
   }
   return ParseParams(model, o.params, p);
@@ -203,8 +189,8 @@ void RunDiagnose(DiagnoseOptions& o) {
     start[model->ParamIndex("l1")] = 1.0;
     start[model->ParamIndex("l2")] = data.link_lengths_px[1] / data.link_lengths_px[0];
   }
-  fs::create_directories(o.out);
   const DiagnosisResult r = Diagnose(model, start, data, pipeline);
+  fs::create_directories(o.out);  // only once every input has been checked
 
   // Outputs: model file, residual CSV, plots, report.
   const fs::path out(o.out);
@@ -276,21 +262,29 @@ void RegisterDiagnoseCommand(CLI::App& app) {
       ->check(CLI::IsMember({"pendulum", "cartpole", "double-pendulum", "arm2", "panda"}));
   command->add_option("--measured", o->measured,
                       "Joint-space CSV (t,q1..,qd1..,tau1..[,qdd1..]) or a dataset folder of shared/data")
+      ->check(InputPath(true))
       ->required();
   command->add_option("--param", o->params, "Nominal parameter override name=value (repeatable)");
-  command->add_option("--params", o->params_file, "JSON file {name: value} of nominal parameters");
-  command->add_option("--out", o->out, "Output folder (report.md, extended_model.json, plots)")->required();
+  command->add_option("--params", o->params_file, "JSON file {name: value} of nominal parameters")
+      ->check(InputPath());
+  command->add_option("--out", o->out, "Output folder (report.md, extended_model.json, plots)")
+      ->check(OutputPath(true))->required();
   command->add_option("--cutoff-hz", o->pipeline.cutoff_hz,
-                      "Zero-phase smoothing cutoff (Hz, at most 10; default 0: chosen by cross-validation)");
-  command->add_option("--holdout", o->pipeline.holdout_fraction, "Held-out fraction at the end (in time)");
+                      "Zero-phase smoothing cutoff (Hz, at most 10; default 0: chosen by cross-validation)")
+      ->check(Bounded(0, 10));
+  command->add_option("--holdout", o->pipeline.holdout_fraction, "Held-out fraction at the end (in time)")
+      ->check(Bounded(0, 0.9));
   command->add_option("--fit-param", o->fit_params, "Nominal parameter fitted on the first quarter first (repeatable)");
   command->add_option("--scale-param", o->scale_params,
                       "Nominal parameters scaled by one common fitted factor (repeatable)");
   command->add_option("--phase-period", o->pipeline.phase_period,
-                      "Period (s) of a repeating motion: also score a held-out phase window (0 = off)");
-  command->add_option("--rollout-horizon", o->pipeline.rollout_horizon, "Rollout window (s)");
+                      "Period (s) of a repeating motion: also score a held-out phase window (0 = off)")
+      ->check(Bounded(0, 1e4));
+  command->add_option("--rollout-horizon", o->pipeline.rollout_horizon, "Rollout window (s)")
+      ->check(Bounded(1e-3, 1e4));
   command->add_option("--min-effect-to-noise", o->pipeline.min_effect_to_noise,
-                      "Smallest named effect: torque RMS / sensor-noise RMS");
+                      "Smallest named effect: torque RMS / sensor-noise RMS")
+      ->check(Bounded(0, 1e6));
   command->callback([o] { RunDiagnose(*o); });
 }
 

@@ -74,6 +74,12 @@ void RunEval(const EvalCommandOptions& o) {
   const std::unique_ptr<TransitionModel> model = LoadModel(o, dt.median);
   const Dataset data = DatasetForModel(read, model->description(), "--model " + o.model);
   const Evaluation e = EvaluateModel(*model, data, o.threads);
+  // A model whose predictions overflow is a runtime failure, not a result.
+  if (!std::isfinite(e.single_step_loss) || !std::isfinite(e.baseline_single_step_loss) ||
+      (e.n_windows > 0 && !std::isfinite(e.avg_multi_step_loss))) {
+    throw NumericalError(StrCat("--model ", o.model, ": the loss on ", o.data,
+                                " is not finite (the model's predictions overflow on this data)"));
+  }
   const auto* learned = dynamic_cast<const LearnedModel*>(model.get());
   const bool ode = learned && IsNeuralOde(learned->config().type);
   if (o.common.json) {
@@ -118,16 +124,20 @@ void RegisterEvalCommand(CLI::App& app) {
       ->required();
   command->add_option("--data", o->data,
                       "Dataset: a pushing CSV, a joint-space CSV or a real-data folder")
+      ->check(InputPath(true))
       ->required();
   const CLI::Option* solver = command->add_option("--solver", o->solver,
                       "Integrate a NeuralODE or physics model with this solver instead of its own "
                       "(rk4, rk4-classic, euler, midpoint; dopri5 for NeuralODEs)");
   const CLI::Option* steps = command->add_option("--steps", o->steps,
                       "NeuralODE only: grid points on [0, 1] instead of the model's (>= 2)")
+      ->check(Bounded(2, 10000))
                           ->default_str("");
   command->add_option("--substeps", o->substeps, "Physics models: solver steps per transition")
+      ->check(Bounded(1, 10000))
       ->capture_default_str();
-  command->add_option("--threads", o->threads, "Threads (0: all cores)");
+  command->add_option("--threads", o->threads, "Threads (0: all cores)")
+      ->check(Bounded(0, 256));
   command->callback([o, solver, steps] {
     o->solver_given = solver->count() > 0;
     o->steps_given = steps->count() > 0;

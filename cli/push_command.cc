@@ -212,21 +212,28 @@ void RegisterPushCommand(CLI::App& app) {
   AddCommonOptions(command, args->common);
   command->add_option("--model", args->model, "Pushing model file, or 'oracle' (the ODE world)")
       ->required();
-  command->add_option("--trials", args->trials, "Seeded trials (start perturbed per trial)");
+  command->add_option("--trials", args->trials, "Seeded trials (start perturbed per trial)")
+      ->check(Bounded(1, 10000));
   command->add_flag("--obstacle,!--free", args->obstacle,
                     "Obstacle task: start (0.4, 0, -0.2 pi), goal (0.8, -0.1, 0); --free: start "
                     "(0.4, 0, 0.2 pi), goal (0.8, 0, 0)");
-  command->add_option("--samples", args->samples, "MPPI samples K");
-  command->add_option("--horizon", args->horizon, "MPPI horizon T");
-  command->add_option("--max-steps", args->max_steps, "Pushes per trial");
+  command->add_option("--samples", args->samples, "MPPI samples K")
+      ->check(Bounded(1, 1e6));
+  command->add_option("--horizon", args->horizon, "MPPI horizon T")
+      ->check(Bounded(1, 1000));
+  command->add_option("--max-steps", args->max_steps, "Pushes per trial")
+      ->check(Bounded(1, 10000));
   command->add_option("--threads", args->threads,
-                      "MPPI threads (0: all cores; results do not depend on it)");
+                      "MPPI threads (0: all cores; results do not depend on it)")
+      ->check(Bounded(0, 256));
   command->add_option("--collision-margin", args->collision_margin,
                       "Cost: inflate the block by this much per side in the collision test (m)")
+      ->check(Bounded(0, 1))
       ->capture_default_str();
   command->add_option("--collision-substeps", args->collision_substeps,
                       "Cost: also test this many poses interpolated inside each predicted push "
                       "(0: end pose only, the seed's cost)")
+      ->check(Bounded(0, 1000))
       ->capture_default_str();
   command->add_option("--fallback-margin", args->fallback_margin,
                       "MPPI: execute the best sample instead of the weighted average when the "
@@ -234,22 +241,27 @@ void RegisterPushCommand(CLI::App& app) {
       ->capture_default_str();
   command->add_option("--clearance", args->clearance,
                       "Cost: smooth clearance term active closer than this to the obstacle (m; 0: off)")
+      ->check(Bounded(0, 10))
       ->capture_default_str();
   command->add_option("--clearance-weight", args->clearance_weight,
                       "Cost: weight w of the clearance term w (1 - d / clearance)^2")
+      ->check(Bounded(0, 1e9))
       ->capture_default_str();
   command->add_option("--reach-weight", args->reach_weight,
                       "Cost: added once per planned push whose tool path leaves the arm's reach "
                       "(0: off)")
+      ->check(Bounded(0, 1e9))
       ->capture_default_str();
   command->add_option("--reach-steps", args->reach_steps,
                       "Cost: the reach term checks the first this many planned pushes "
                       "(1: only the push executed now)")
+      ->check(Bounded(1, 1000))
       ->capture_default_str();
   command->add_option("--reach-limited", args->reach_limited,
                       "MPPI: predict that a push the arm cannot reach leaves the block in place")
       ->capture_default_str();
-  command->add_option("--out", args->out, "Directory for trials.csv and top_view.png (optional)");
+  command->add_option("--out", args->out, "Directory for trials.csv and top_view.png (optional)")
+      ->check(OutputPath(true));
   command->callback([args] { RunPush(*args); });
 }
 

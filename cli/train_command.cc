@@ -45,6 +45,7 @@ struct TrainCommandOptions {
 nlohmann::json Number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
 
 void RunTrain(const TrainCommandOptions& o) {
+  CheckDistinct(o.data, "--out", o.out);
   const Dataset dataset = ReadDataset(o.data, ResolveJointLayout(o.layout));
   const SampleIntervals dt = dataset.Intervals();
   LearnedModelConfig config;
@@ -81,6 +82,10 @@ void RunTrain(const TrainCommandOptions& o) {
   options.progress = !o.common.quiet;
   Trainer trainer(&model, options);
   const TrainResult result = trainer.Train(data);
+  if (!std::isfinite(result.final_train_loss) || !model.parameters().allFinite()) {
+    throw NumericalError(StrCat("training diverged: the train loss is ", result.final_train_loss,
+                                " (try a smaller --lr or --normalize on); nothing written"));
+  }
 
   const nlohmann::json provenance = {
       {"command", "diffdyn train"}, {"data", o.data},         {"seed", o.common.seed},
@@ -137,29 +142,40 @@ void RegisterTrainCommand(CLI::App& app) {
   AddCommonOptions(command, o->common);
   command->add_option("--data", o->data,
                       "Dataset: a pushing CSV, a joint-space CSV (t, q, qd, tau) or a real-data folder")
+      ->check(InputPath(true))
       ->required();
   command->add_option("--model", o->model, "Model: abs-nn, res-nn, abs-node or res-node");
   command->add_option("--solver", o->solver,
                       "NeuralODE solver: rk4 (3/8 rule), rk4-classic, euler, midpoint, dopri5 "
                       "(tolerance 1e-8)");
-  command->add_option("--steps", o->steps, "NeuralODE grid points on [0, 1] (steps - 1 fixed steps)");
-  command->add_option("--hidden", o->hidden, "Width of both hidden layers");
+  command->add_option("--steps", o->steps, "NeuralODE grid points on [0, 1] (steps - 1 fixed steps)")
+      ->check(Bounded(2, 10000));
+  command->add_option("--hidden", o->hidden, "Width of both hidden layers")
+      ->check(Bounded(1, 4096));
   command->add_option("--loss", o->loss, "single (one step) or multi (4-step rollout, --gamma)");
-  command->add_option("--epochs", o->epochs, "Training epochs");
-  command->add_option("--lr", o->lr, "Adam learning rate");
-  command->add_option("--batch", o->batch, "Mini-batch size");
-  command->add_option("--val-fraction", o->val_fraction, "Held-out fraction (seeded split)");
-  command->add_option("--gamma", o->gamma, "Discount of the multi-step loss");
-  command->add_option("--threads", o->threads, "Threads (0: all cores; results do not depend on it)");
+  command->add_option("--epochs", o->epochs, "Training epochs")
+      ->check(Bounded(1, 1e6));
+  command->add_option("--lr", o->lr, "Adam learning rate")
+      ->check(Bounded(1e-12, 10));
+  command->add_option("--batch", o->batch, "Mini-batch size")
+      ->check(Bounded(1, 1e7));
+  command->add_option("--val-fraction", o->val_fraction, "Held-out fraction (seeded split)")
+      ->check(Bounded(0, 0.9));
+  command->add_option("--gamma", o->gamma, "Discount of the multi-step loss")
+      ->check(Bounded(0, 1));
+  command->add_option("--threads", o->threads, "Threads (0: all cores; results do not depend on it)")
+      ->check(Bounded(0, 256));
   command->add_option("--patience", o->patience,
-                      "Stop when the validation loss has not improved for this many epochs (0: never)");
+                      "Stop when the validation loss has not improved for this many epochs (0: never)")
+      ->check(Bounded(0, 1e6));
   command->add_option("--normalize", o->normalize,
                       "Scale the network's inputs and outputs to unit size from the training data: "
                       "auto = on except for pushing CSVs (the paper's models), on, off")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->capture_default_str();
   AddJointLayoutOptions(command, o->layout);
-  command->add_option("--out", o->out, "Model file to write");
+  command->add_option("--out", o->out, "Model file to write")
+      ->check(OutputPath());
   command->callback([o] { RunTrain(*o); });
 }
 

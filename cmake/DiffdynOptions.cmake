@@ -22,7 +22,8 @@ target_compile_options(diffdyn_project_options INTERFACE
   $<$<BOOL:${DIFFDYN_STRICT}>:-Werror>
   $<$<AND:$<BOOL:${DIFFDYN_STRICT}>,${DIFFDYN_GCC12}>:-Wno-error=array-bounds -Wno-error=restrict>
   $<$<BOOL:${DIFFDYN_NATIVE}>:-march=native>
-  $<$<BOOL:${DIFFDYN_SANITIZE}>:-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined>)
+  $<$<BOOL:${DIFFDYN_SANITIZE}>:-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined>
+  $<$<BOOL:${DIFFDYN_FUZZ}>:-fsanitize=fuzzer-no-link>)
 target_link_options(diffdyn_project_options INTERFACE
   $<$<BOOL:${DIFFDYN_SANITIZE}>:-fsanitize=address,undefined>)
 

@@ -29,17 +29,15 @@ Eigen::Index CountParameters(const nlohmann::json& arch) {
                   "architecture: each effect needs 'kind' and integer 'joint'");
     const EffectKindInfo& info = Info(ParseEffectKind(e["kind"].get<std::string>()));
     DIFFDYN_CHECK(info.kind != EffectKind::kResidual, "architecture: the residual goes in 'residual'");
-    const int joint = e["joint"].get<int>();
+    const int joint = static_cast<int>(JsonInt(e["joint"], 0, 1 << 20, "architecture: effect 'joint'"));
     DIFFDYN_CHECK(info.per_joint ? (joint >= 1 && joint <= model->dof()) : joint == 0,
                   "architecture: effect ", info.name, " has joint ", joint);
     count += static_cast<Eigen::Index>(info.params.size());
   }
   if (arch.contains("residual") && !arch["residual"].is_null()) {
     const auto& r = arch["residual"];
-    DIFFDYN_CHECK(r.is_object() && r.contains("hidden") && r["hidden"].is_number_integer() &&
-                      r["hidden"].get<int>() > 0,
-                  "architecture: residual needs a positive integer 'hidden'");
-    const Eigen::Index n = model->dof(), h = r["hidden"].get<int>();
+    DIFFDYN_CHECK(r.is_object() && r.contains("hidden"), "architecture: residual needs an integer 'hidden'");
+    const Eigen::Index n = model->dof(), h = JsonInt(r["hidden"], 1, 4096, "architecture: residual 'hidden'");
     count += 6 * n + h * 3 * n + h + n * h + n;
   }
   return count;

@@ -11,6 +11,7 @@
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/trajectory.h"
 
 namespace diffdyn {
 namespace {
@@ -43,15 +44,16 @@ double ParseNumber(const std::string& text, const std::string& where) {
   } catch (const std::exception&) {
     used = 0;
   }
-  DIFFDYN_CHECK(used == text.size() && !text.empty() && std::isfinite(value), where, ": '", text,
+  DIFFDYN_CHECK(used == text.size() && !text.empty() && std::isfinite(value), where, ": '", text.substr(0, 40),
                 "' is not a finite number");
+  DIFFDYN_CHECK(std::abs(value) <= kMaxDataMagnitude, where, ": ", value, " is larger in magnitude than ",
+                kMaxDataMagnitude);
   return value;
 }
 
 // Reads a file of one number per line.
 std::vector<double> ReadColumnFile(const fs::path& path) {
-  std::ifstream in(path);
-  DIFFDYN_CHECK(in.good(), path.string(), ": cannot open");
+  std::ifstream in = OpenInputFile(path);
   std::vector<double> values;
   std::string line;
   for (int line_no = 1; std::getline(in, line); ++line_no) {
@@ -117,8 +119,7 @@ JointData ReadPandaGaz(const fs::path& dir) {
 }
 
 JointData ReadIbmRun(const fs::path& file) {
-  std::ifstream in(file);
-  DIFFDYN_CHECK(in.good(), file.string(), ": cannot open");
+  std::ifstream in = OpenInputFile(file);
   std::vector<std::array<double, 6>> rows;
   std::string line;
   for (int line_no = 1; std::getline(in, line); ++line_no) {
@@ -183,8 +184,7 @@ JointData ReadDelan(const fs::path& file) {
 }  // namespace
 
 JointData ReadJointCsv(const std::string& path) {
-  std::ifstream in(path);
-  DIFFDYN_CHECK(in.good(), path, ": cannot open");
+  std::ifstream in = OpenInputFile(path);
   std::string line;
   DIFFDYN_CHECK(static_cast<bool>(std::getline(in, line)), path, ":1: empty file");
   const auto header = SplitCsv(line);
@@ -311,8 +311,7 @@ JointData ReadMeasured(const std::string& path) {
                        "DeLaN characters)"));
   }
   // A headerless file of 6 integers per line is an IBM run.
-  std::ifstream in(p);
-  DIFFDYN_CHECK(in.good(), "--measured ", path, ": cannot open");
+  std::ifstream in = OpenInputFile(p);
   std::string first;
   std::getline(in, first);
   const auto cells = SplitCsv(first);

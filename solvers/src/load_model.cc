@@ -3,6 +3,7 @@
 #include <filesystem>
 #include <utility>
 
+#include "diffdyn/autodiff_ode/io.h"
 #include "diffdyn/models/learned_model.h"
 #include "diffdyn/models/model_file.h"
 #include "diffdyn/physics/effects.h"
@@ -43,9 +44,14 @@ std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
                                                          std::vector<Effect>{});
     return Continuous(std::move(nominal), spec, name, options);
   }
-  DIFFDYN_CHECK(std::filesystem::is_regular_file(spec), "--model ", spec,
+  DIFFDYN_CHECK(std::filesystem::exists(spec), "--model ", spec,
                 ": no such file, and not oracle or an analytic model (pendulum, cartpole, "
                 "double-pendulum, arm2, panda)");
+  try {
+    CheckInputPath(spec);
+  } catch (const Error& e) {
+    throw Error(StrCat("--model ", e.what()));
+  }
   RegisterLearnedModelKinds();
   RegisterExtendedPhysicsKind();
   const ModelFile file = LoadModelFile(spec);

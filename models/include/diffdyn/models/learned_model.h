@@ -140,13 +140,18 @@ struct Scaling {
 
 /// Everything that fixes a model's function apart from its parameters.
 struct LearnedModelConfig {
+  /// Widest hidden layer accepted (a 4096-wide square layer holds 16.8 M parameters).
+  static constexpr int kMaxHidden = 4096;
+  /// Most NeuralODE grid points accepted.
+  static constexpr int kMaxSteps = 10000;
+
   LearnedKind type = LearnedKind::kAbsNode;
-  /// h, the width of both hidden layers.
+  /// h, the width of both hidden layers, 1 to kMaxHidden.
   int hidden = 100;
   /// NeuralODE solver (ignored by the NNs).
   Method method = Method::kRk4;
-  /// NeuralODE grid points on [0, 1] (>= 2): steps - 1 fixed steps; dopri5's first trial step
-  /// is 1 / (steps - 1).
+  /// NeuralODE grid points on [0, 1] (2 to kMaxSteps): steps - 1 fixed steps; dopri5's first
+  /// trial step is 1 / (steps - 1).
   int steps = 10;
   /// dopri5 absolute = relative tolerance.
   double tolerance = 1e-8;
@@ -166,12 +171,14 @@ struct LearnedModelConfig {
     return {{system.feature_size(), hidden, hidden, out}, {activation, activation}};
   }
 
-  /// Throws diffdyn::Error naming the option for hidden < 1, steps < 2 or tolerance <= 0,
-  /// or for an invalid system.
+  /// Throws diffdyn::Error naming the option for hidden outside [1, kMaxHidden], steps
+  /// outside [2, kMaxSteps] or tolerance <= 0, or for an invalid system.
   void Validate() const {
     system.Validate();
-    DIFFDYN_CHECK(hidden >= 1, "--hidden must be >= 1, got ", hidden);
-    DIFFDYN_CHECK(steps >= 2, "--steps must be >= 2 (grid points on [0, 1]), got ", steps);
+    DIFFDYN_CHECK(hidden >= 1 && hidden <= kMaxHidden, "--hidden must be in [1, ", kMaxHidden, "], got ",
+                  hidden);
+    DIFFDYN_CHECK(steps >= 2 && steps <= kMaxSteps, "--steps must be in [2, ", kMaxSteps,
+                  "] (grid points on [0, 1]), got ", steps);
     DIFFDYN_CHECK(tolerance > 0 && std::isfinite(tolerance), "tolerance must be positive, got ",
                   tolerance);
     const MlpArchitecture arch = Architecture();
@@ -767,13 +774,13 @@ inline LearnedModelConfig LearnedConfigFromJson(const std::string& kind, const n
     DIFFDYN_CHECK(j.contains(key), "architecture: missing '", key, "'");
     return j[key];
   };
-  DIFFDYN_CHECK(field("hidden").is_number_integer(), "architecture: 'hidden' must be an integer");
   DIFFDYN_CHECK(field("solver").is_string(), "architecture: 'solver' must be a string");
-  DIFFDYN_CHECK(field("steps").is_number_integer(), "architecture: 'steps' must be an integer");
   DIFFDYN_CHECK(field("tolerance").is_number(), "architecture: 'tolerance' must be a number");
-  config.hidden = j["hidden"].get<int>();
+  config.hidden = static_cast<int>(
+      JsonInt(field("hidden"), 1, LearnedModelConfig::kMaxHidden, "architecture: 'hidden'"));
   config.method = ParseMethod(j["solver"].get<std::string>(), "architecture: solver");
-  config.steps = j["steps"].get<int>();
+  config.steps =
+      static_cast<int>(JsonInt(field("steps"), 2, LearnedModelConfig::kMaxSteps, "architecture: 'steps'"));
   config.tolerance = j["tolerance"].get<double>();
   if (j.contains("scaling")) {
     const nlohmann::json& sc = j["scaling"];

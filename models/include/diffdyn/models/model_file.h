@@ -246,17 +246,7 @@ inline void SaveModelFile(const std::filesystem::path& path, const ModelFile& fi
 /// wrong-size or non-finite file.
 inline ModelFile LoadModelFile(const std::filesystem::path& path) {
   const std::string name = path.string();
-  std::ifstream in(path, std::ios::binary);
-  DIFFDYN_CHECK(in.good(), name, ": cannot open model file");
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(buffer.str());
-  } catch (const nlohmann::json::exception& e) {
-    throw Error(internal::OneLine(StrCat(name, ": not valid JSON (truncated or corrupt?): ", e.what())));
-  }
-  return ModelFileFromJson(j, name);
+  return ModelFileFromJson(ReadJsonFile(path), name);
 }
 
 /// Saves an MLP as kind "mlp" with the given provenance and metrics objects.

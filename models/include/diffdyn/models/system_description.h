@@ -27,6 +27,7 @@
 #include <nlohmann/json.hpp>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/models/json_io.h"
 
 namespace diffdyn {
 
@@ -175,8 +176,7 @@ inline SystemDescription SystemFromJson(const nlohmann::json& j) {
   s.action_names = strings("action");
   DIFFDYN_CHECK(j.contains("angles") && j["angles"].is_array(), "system: 'angles' must be a list");
   for (const auto& v : j["angles"]) {
-    DIFFDYN_CHECK(v.is_number_integer(), "system: 'angles' must hold integers");
-    s.angles.push_back(v.get<int>());
+    s.angles.push_back(static_cast<int>(JsonInt(v, 0, 1 << 20, "system: each of 'angles'")));
   }
   DIFFDYN_CHECK(j.contains("angle_features") && j["angle_features"].is_string(),
                 "system: 'angle_features' must be \"raw\" or \"sincos\"");

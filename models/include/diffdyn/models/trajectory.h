@@ -32,6 +32,10 @@
 
 namespace diffdyn {
 
+/// Largest magnitude of any number a data file may hold (times, states, actions
+/// and channels alike): larger values overflow the squared errors and filters.
+inline constexpr double kMaxDataMagnitude = 1e12;
+
 /// Times (T + 1), states (n x (T + 1)), actions (m x T) and named channels
 /// (rows x (T + 1) each) of one run; T may be 0.
 struct Trajectory {

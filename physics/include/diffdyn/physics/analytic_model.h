@@ -43,6 +43,7 @@
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/jacobian.h"  // VectorX<T>
 #include "diffdyn/models/continuous_model.h"
+#include "diffdyn/models/json_io.h"
 #include "diffdyn/models/system_description.h"
 
 namespace diffdyn {
@@ -273,10 +274,13 @@ inline SystemDescription AnalyticSystem(const AnalyticModel& model) {
   return s;
 }
 
+/// Largest magnitude a physical parameter may be given (SI units).
+inline constexpr double kMaxParamMagnitude = 1e6;
+
 /// p from the defaults overridden by `assignments` ("name=value", as given to
 /// --param; a 3-vector parameter `v` with entries v_x, v_y, v_z also accepts
 /// "v=a,b,c"). Throws diffdyn::Error naming the option for an unknown name or a
-/// value that is not a finite number.
+/// value that is not a finite number of magnitude at most kMaxParamMagnitude.
 inline Eigen::VectorXd ParseParams(const AnalyticModel& model,
                                    const std::vector<std::string>& assignments,
                                    Eigen::VectorXd p = Eigen::VectorXd()) {
@@ -290,7 +294,9 @@ inline Eigen::VectorXd ParseParams(const AnalyticModel& model,
       used = 0;
     }
     DIFFDYN_CHECK(used == text.size() && !text.empty() && std::isfinite(value), "--param ",
-                  option, ": '", text, "' is not a finite number");
+                  option, ": '", text.substr(0, 40), "' is not a finite number");
+    DIFFDYN_CHECK(std::abs(value) <= kMaxParamMagnitude, "--param ", option.substr(0, 60), ": ", value,
+                  " is outside [-1e6, 1e6] (parameters are in SI units)");
     return value;
   };
   for (const std::string& assignment : assignments) {
@@ -329,6 +335,26 @@ inline Eigen::VectorXd ParseParams(const AnalyticModel& model,
     }
   }
   return p;
+}
+
+/// p from `p` (default: the model's defaults) overridden by the JSON file at
+/// `path`, an object {name: value} or {"params": {name: value}} with the names
+/// and limits of ParseParams. Throws diffdyn::Error "<path>: ..." (one line).
+inline Eigen::VectorXd ReadParamsFile(const AnalyticModel& model, const std::string& path,
+                                      Eigen::VectorXd p = Eigen::VectorXd()) {
+  nlohmann::json j = ReadJsonFile(path);
+  if (j.is_object() && j.contains("params")) j = nlohmann::json(j["params"]);
+  DIFFDYN_CHECK(j.is_object(), path, ": expected an object {name: value}");
+  std::vector<std::string> assignments;
+  for (const auto& [name, value] : j.items()) {
+    DIFFDYN_CHECK(value.is_number(), path, ": '", name.substr(0, 40), "' is not a number");
+    assignments.push_back(StrCat(name, "=", value.get<double>()));
+  }
+  try {
+    return ParseParams(model, assignments, std::move(p));
+  } catch (const Error& e) {
+    throw Error(StrCat(path, ": ", e.what()));
+  }
 }
 
 }  // namespace diffdyn

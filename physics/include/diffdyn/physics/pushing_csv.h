@@ -92,8 +92,7 @@ inline Trajectory MakePushingTrajectory(const std::vector<Eigen::Vector3d>& pose
 /// number or a ragged trajectory.
 inline std::vector<Trajectory> ReadPushingCsv(const std::filesystem::path& path) {
   using pushing_csv_internal::kColumns;
-  std::ifstream in(path);
-  DIFFDYN_CHECK(in.good(), path.string(), ": cannot open pushing CSV");
+  std::ifstream in = OpenInputFile(path);
   std::string line;
   DIFFDYN_CHECK(static_cast<bool>(std::getline(in, line)), path.string(), ": empty file");
   if (!line.empty() && line.back() == '\r') line.pop_back();
@@ -134,6 +133,8 @@ inline std::vector<Trajectory> ReadPushingCsv(const std::filesystem::path& path)
       // from_chars accepts "nan" and "inf"; no model can learn from them.
       DIFFDYN_CHECK(std::isfinite(value), where(), "column ", kColumns[i], ": '", std::string(f),
                     "' is not finite");
+      DIFFDYN_CHECK(std::abs(value) <= kMaxDataMagnitude, where(), "column ", kColumns[i], ": ", value,
+                    " is larger in magnitude than ", kMaxDataMagnitude);
       return value;
     };
     auto parse_long = [&](size_t i) {

@@ -1,0 +1,27 @@
+// Fuzz target: the model-file loader of every kind (learned, extended-physics),
+// then one batched prediction from the rest state, as every command that loads
+// a model does next.
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+
+#include <Eigen/Core>
+
+#include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/solvers/load_model.h"
+#include "fuzz_input.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const std::string path = diffdyn::fuzz::WriteBytes(diffdyn::fuzz::ScratchFolder() / "model.json", data, size);
+  try {
+    const std::unique_ptr<diffdyn::TransitionModel> model =
+        diffdyn::LoadTransitionModel(path, {.dt = 0.01, .substeps = 1});
+    const Eigen::MatrixXd states = Eigen::MatrixXd::Zero(model->state_size(), 2);
+    const Eigen::MatrixXd actions = Eigen::MatrixXd::Zero(model->action_size(), 2);
+    Eigen::MatrixXd next(model->state_size(), 2);
+    auto workspace = model->MakeWorkspace(2);
+    model->PredictBatch(states, actions, next, *workspace);
+  } catch (const diffdyn::Error&) {
+  }
+  return 0;
+}
