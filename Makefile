@@ -48,7 +48,7 @@ test-asan:
 fuzz-quick:
 	@scripts/install-deps --ci
 	@cmake --preset debug-asan >/dev/null
-	@cmake --build --preset debug-asan -j $(JOBS) --target fuzz_dataset fuzz_measured fuzz_model_file fuzz_params
+	@cmake --build --preset debug-asan -j $(JOBS) --target fuzz_dataset fuzz_measured fuzz_model_file fuzz_params fuzz_options
 	@ctest --test-dir build-asan -L fuzz -j $(JOBS) --output-on-failure
 
 demo: build

@@ -54,6 +54,10 @@ void PrintJson(const nlohmann::json& summary);
 /// Registers every subcommand on `app` (commands.cc).
 void RegisterCommands(CLI::App& app);
 
+/// The whole command line on `app`: name, --version and every subcommand with
+/// its options, validators and callback (run.cc).
+void BuildApp(CLI::App& app);
+
 /// Runs the command line; returns the process exit code (main.cc).
 int Run(int argc, char** argv);
 

@@ -65,8 +65,6 @@ std::unique_ptr<TransitionModel> LoadModel(const EvalCommandOptions& o, double d
   return model;
 }
 
-nlohmann::json Number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
-
 void RunEval(const EvalCommandOptions& o) {
   DIFFDYN_CHECK(o.substeps >= 1, "--substeps must be >= 1, got ", o.substeps);
   const Dataset read = ReadDataset(o.data, JointLayout{.all_actuated = true});
@@ -74,9 +72,10 @@ void RunEval(const EvalCommandOptions& o) {
   const std::unique_ptr<TransitionModel> model = LoadModel(o, dt.median);
   const Dataset data = DatasetForModel(read, model->description(), "--model " + o.model);
   const Evaluation e = EvaluateModel(*model, data, o.threads);
+  DIFFDYN_CHECK(e.n_windows > 0, "--data ", o.data, ": no trajectory has the 5 samples of a 4-step window");
   // A model whose predictions overflow is a runtime failure, not a result.
   if (!std::isfinite(e.single_step_loss) || !std::isfinite(e.baseline_single_step_loss) ||
-      (e.n_windows > 0 && !std::isfinite(e.avg_multi_step_loss))) {
+      !std::isfinite(e.avg_multi_step_loss)) {
     throw NumericalError(StrCat("--model ", o.model, ": the loss on ", o.data,
                                 " is not finite (the model's predictions overflow on this data)"));
   }
@@ -85,7 +84,7 @@ void RunEval(const EvalCommandOptions& o) {
   if (o.common.json) {
     nlohmann::json summary = {{"n_samples", e.n_samples},
                               {"single_step_loss", e.single_step_loss},
-                              {"avg_multi_step_loss", Number(e.avg_multi_step_loss)},
+                              {"avg_multi_step_loss", e.avg_multi_step_loss},
                               {"baseline_single_step_loss", e.baseline_single_step_loss},
                               {"n_windows", e.n_windows},
                               {"model", model->kind()},

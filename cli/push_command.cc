@@ -13,6 +13,7 @@
 // DIR/top_view.png of the first successful trial (else the first trial).
 #include "push_command.h"
 
+#include <cmath>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -173,7 +174,8 @@ void RunPush(const PushArgs& args) {
                {"max_steps", args.max_steps},
                {"collision_margin", args.collision_margin},
                {"collision_substeps", args.collision_substeps},
-               {"fallback_margin", args.fallback_margin},
+               {"fallback_margin",  // null: off (inf)
+                std::isfinite(args.fallback_margin) ? nlohmann::json(args.fallback_margin) : nlohmann::json()},
                {"fallbacks", fallbacks},
                {"clearance", args.clearance},
                {"clearance_weight", args.clearance_weight},

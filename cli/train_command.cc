@@ -41,9 +41,6 @@ struct TrainCommandOptions {
   std::string out = "model.json";
 };
 
-// NaN is not JSON: missing validation losses are written as null.
-nlohmann::json Number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
-
 void RunTrain(const TrainCommandOptions& o) {
   CheckDistinct(o.data, "--out", o.out);
   const Dataset dataset = ReadDataset(o.data, ResolveJointLayout(o.layout));
@@ -59,12 +56,14 @@ void RunTrain(const TrainCommandOptions& o) {
                 "' (expected single or multi)");
   const int horizon = o.loss == "multi" ? 4 : 1;
   const Windows data = MakeWindows(dataset, horizon);
+  std::vector<int> train_index, val_index;
+  SplitWindows(data.size(), o.val_fraction, o.common.seed, &train_index, &val_index);
+  DIFFDYN_CHECK(!train_index.empty() && !val_index.empty(), "--val-fraction ", o.val_fraction, " of the ",
+                data.size(), " samples of ", o.data, " leaves ", train_index.size(), " for training and ",
+                val_index.size(), " for validation (both need at least one)");
   // Unit-scale network inputs and outputs, fitted on the training split's first steps.
   const bool normalize = o.normalize == "on" || (o.normalize == "auto" && dataset.format != "pushing-csv");
   if (normalize) {
-    std::vector<int> train_index;
-    SplitWindows(data.size(), o.val_fraction, o.common.seed, &train_index, nullptr);
-    DIFFDYN_CHECK(!train_index.empty(), "--val-fraction ", o.val_fraction, " leaves no training samples");
     const Windows train = SelectWindows(data, train_index);
     config.scaling = FitScaling(config, train.start, train.actions[0], train.targets[0]);
   }
@@ -94,8 +93,8 @@ void RunTrain(const TrainCommandOptions& o) {
       {"n_train", result.n_train},  {"n_val", result.n_val},    {"dt", dt.median},
       {"dt_min", dt.min},           {"dt_max", dt.max},        {"epochs_run", result.epochs.size()},
       {"normalized", normalize}};
-  const nlohmann::json metrics = {{"final_train_loss", Number(result.final_train_loss)},
-                                  {"final_val_loss", Number(result.final_val_loss)},
+  const nlohmann::json metrics = {{"final_train_loss", result.final_train_loss},
+                                  {"final_val_loss", result.final_val_loss},
                                   {"seconds_per_epoch", result.seconds_per_epoch}};
   SaveLearnedModel(o.out, model, provenance, metrics);
 
@@ -110,8 +109,8 @@ void RunTrain(const TrainCommandOptions& o) {
                {"dt_jitter", dt.jitter()},
                {"normalized", normalize},
                {"seconds_per_epoch", result.seconds_per_epoch},
-               {"final_train_loss", Number(result.final_train_loss)},
-               {"final_val_loss", Number(result.final_val_loss)},
+               {"final_train_loss", result.final_train_loss},
+               {"final_val_loss", result.final_val_loss},
                {"model", o.model},
                {"loss", o.loss},
                {"parameters", model.num_parameters()}});
@@ -160,7 +159,7 @@ void RegisterTrainCommand(CLI::App& app) {
   command->add_option("--batch", o->batch, "Mini-batch size")
       ->check(Bounded(1, 1e7));
   command->add_option("--val-fraction", o->val_fraction, "Held-out fraction (seeded split)")
-      ->check(Bounded(0, 0.9));
+      ->check(Bounded(1e-6, 0.9));
   command->add_option("--gamma", o->gamma, "Discount of the multi-step loss")
       ->check(Bounded(0, 1));
   command->add_option("--threads", o->threads, "Threads (0: all cores; results do not depend on it)")

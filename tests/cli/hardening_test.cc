@@ -129,6 +129,17 @@ TEST_F(Hardening, DevicesFifosAndFoldersAreRefused) {
   std::filesystem::remove(fifo);
 }
 
+TEST_F(Hardening, ResultsThatCannotBeComputedAreErrorsNotNulls) {
+  // Every JSON key of train and eval is a finite number: no split without a
+  // validation sample, no data without a 4-step window.
+  const std::string tiny = TempPath("hardening_tiny.csv");
+  std::ofstream(tiny) << "t,q1,qd1,tau1\n0,0.1,0,0\n0.01,0.1,0,0.5\n0.02,0.1,0,0\n0.03,0.1,0,0.2\n";
+  ExpectBadInput(RunDiffdyn("train --quiet --epochs 1 --val-fraction 0.000001 --data " + data_ + " --out " +
+                            TempPath("hardening_t.json")),
+                 "--val-fraction");
+  ExpectBadInput(RunDiffdyn("eval --quiet --model pendulum --data " + tiny), "4-step window");
+}
+
 TEST_F(Hardening, AMegabyteOfInputIsNotEchoed) {
   const std::string wide = TempPath("hardening_wide.csv");
   std::ofstream(wide) << "t," << std::string(1 << 20, 'x') << "\n0,1\n";

@@ -287,7 +287,7 @@ TEST(LearnedModel, RejectsInconsistentModelFiles) {
   expect_rejected(bad, "rk5");
   bad = j;
   bad["architecture"]["steps"] = 1;
-  expect_rejected(bad, "--steps");
+  expect_rejected(bad, "'steps'");
   bad = j;
   bad["kind"] = "mlp";
   expect_rejected(bad, "kind 'mlp'");

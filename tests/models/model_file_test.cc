@@ -76,7 +76,7 @@ TEST(ModelFile, RejectsTruncatedFiles) {
     WriteAll(bad, text.substr(0, static_cast<std::size_t>(fraction * text.size())));
     ExpectRejected(bad, "not valid JSON");
   }
-  ExpectRejected(TempDir() / "does_not_exist.json", "cannot open");
+  ExpectRejected(TempDir() / "does_not_exist.json", "no such file");
 }
 
 // Writes a modified copy of a good file.
