@@ -3,7 +3,7 @@
 #   make test        install missing dependencies, build, run every test
 #   make test-quick  the same with the tests labelled `quick` only
 #   make test-asan   clang++ ASan + UBSan build (preset debug-asan, build-asan/), the
-#                    tests of autodiff_ode, models, physics, solvers and cli
+#                    tests of autodiff_ode, models, physics and cli
 #   make fuzz-quick  the same build, each libFuzzer target for 12 s (fuzz/README.md)
 #   make bench       benchmarks side by side with the PyTorch reference
 # Variables: BUILD_DIR (build), BUILD_TYPE (Release), NATIVE (ON: -march=native;
@@ -18,7 +18,7 @@ CXX_COMPILER ?=
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
 # The test programs of the library's folders and the command line (test-asan).
-ASAN_TESTS = autodiff_ode_tests models_tests physics_tests solvers_tests cli_tests
+ASAN_TESTS = autodiff_ode_tests models_tests physics_tests cli_tests
 
 .PHONY: all deps configure build test test-quick test-asan fuzz-quick demo bench clean
 
@@ -47,7 +47,7 @@ test-asan:
 	@cmake --build --preset debug-asan -j $(JOBS) --target $(ASAN_TESTS)
 	@cd build-asan && ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 \
 	  UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-	  ctest -j $(JOBS) --output-on-failure --timeout 1800 -L '^(autodiff_ode|models|physics|solvers|cli)$$' -E '^install\.'
+	  ctest -j $(JOBS) --output-on-failure --timeout 1800 -L '^(autodiff_ode|models|physics|cli)$$' -E '^install\.'
 
 fuzz-quick:
 	@scripts/install-deps --ci
