@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <exception>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <new>
 #include <string>
@@ -66,29 +67,34 @@ CLI::Validator Bounded(double lo, double hi) {
       "in " + range);
 }
 
-CLI::Validator InputPath(bool allow_folder) {
+namespace {
+
+// A validator whose message is the diffdyn::Error `check(text)` throws.
+CLI::Validator FromCheck(std::function<void(const std::string&)> check, std::string description) {
   return CLI::Validator(
-      [allow_folder](std::string& path) -> std::string {
+      [check = std::move(check)](std::string& text) -> std::string {
         try {
-          CheckInputPath(path, allow_folder);
+          check(text);
         } catch (const Error& e) {
           return e.what();
         }
         return {};
       },
-      allow_folder ? "FILE|FOLDER" : "FILE");
+      std::move(description));
+}
+
+}  // namespace
+
+CLI::Validator InputPath(bool allow_folder) {
+  return FromCheck([allow_folder](const std::string& path) { CheckInputPath(path, allow_folder); },
+                   allow_folder ? "FILE|FOLDER" : "FILE");
 }
 
 CLI::Validator OutputPath(bool folder) {
-  return CLI::Validator(
-      [folder](std::string& path) -> std::string {
-        if (path.empty()) return "empty path";
-        try {
-          CheckOutputPath(path, folder);
-        } catch (const Error& e) {
-          return e.what();
-        }
-        return {};
+  return FromCheck(
+      [folder](const std::string& path) {
+        DIFFDYN_CHECK(!path.empty(), "empty path");
+        CheckOutputPath(path, folder);
       },
       folder ? "FOLDER" : "FILE");
 }
