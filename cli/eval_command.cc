@@ -12,15 +12,24 @@
 // --solver / --steps re-integrate a NeuralODE with another solver or grid than it
 // was trained with (same weights); for continuous-time physics models --solver and
 // --substeps set the integration.
+//
+// A DeLaN model file (kind "delan") is scored as inverse dynamics instead: on the
+// DeLaN characters the test characters e, q, v, on other joint-space data every
+// sample; the torque, force-component, energy and power errors of DESIGN.md
+// (`torque_mse`, `inertial_mse`, ..., `*_nmse`) and `min_mass_eigenvalue`.
 #include <cmath>
+#include <filesystem>
 #include <memory>
 #include <string>
 
 #include <fmt/core.h>
 
 #include "command.h"
+#include "diffdyn/models/delan.h"
+#include "diffdyn/models/json_io.h"
 #include "diffdyn/models/learned_model.h"
 #include "diffdyn/solvers/dataset_io.h"
+#include "diffdyn/solvers/delan_training.h"
 #include "diffdyn/solvers/load_model.h"
 #include "diffdyn/solvers/training.h"
 
@@ -65,7 +74,44 @@ std::unique_ptr<TransitionModel> LoadModel(const EvalCommandOptions& o, double d
   return model;
 }
 
+// Whether --model names a model file of kind "delan".
+bool IsDelanFile(const std::string& spec) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(spec, ec)) return false;
+  const nlohmann::json j = ReadJsonFile(spec);
+  return j.is_object() && j.contains("kind") && j["kind"] == "delan";
+}
+
+void RunEvalDelan(const EvalCommandOptions& o) {
+  const Delan model = LoadDelan(o.model);
+  const JointData data = ReadMeasured(o.data);
+  DIFFDYN_CHECK(data.dof() == model.dof(), "--data ", o.data, ": ", data.dof(), " joints, the DeLaN in ",
+                o.model, " has ", model.dof());
+  // The held-out characters on the DeLaN data; every sample elsewhere.
+  const JointData test = data.format == "delan-characters" ? SplitForDelan(data, 0.2, 0).test
+                                                          : WithAccelerations(data);
+  const std::map<std::string, double> scores = ScoreDelan(model, test, o.threads);
+  for (const auto& [key, value] : scores) {
+    if (!std::isfinite(value)) {
+      throw NumericalError(StrCat("--model ", o.model, ": ", key, " on ", o.data, " is not finite"));
+    }
+  }
+  if (o.common.json) {
+    nlohmann::json summary = {{"model", "delan"}};
+    for (const auto& [key, value] : scores) summary[key] = value;
+    summary["n_samples"] = test.size();
+    PrintJson(summary);
+    return;
+  }
+  fmt::print("delan on {} ({} samples{}):\n", o.data, test.size(),
+             data.format == "delan-characters" ? ", test characters e, q, v" : "");
+  for (const auto& [key, value] : scores) {
+    if (key != "n_samples") fmt::print("  {:<20} {:.4e}\n", key, value);
+  }
+}
+
 void RunEval(const EvalCommandOptions& o) {
+  if (IsDelanFile(o.model)) return RunEvalDelan(o);
   DIFFDYN_CHECK(o.substeps >= 1, "--substeps must be >= 1, got ", o.substeps);
   const Dataset read = ReadDataset(o.data, JointLayout{.all_actuated = true});
   const SampleIntervals dt = read.Intervals();
@@ -114,11 +160,12 @@ void RunEval(const EvalCommandOptions& o) {
 
 void RegisterEvalCommand(CLI::App& app) {
   auto* command = app.add_subcommand(
-      "eval", "Single-step, average multi-step and baseline loss of any dynamics model on a dataset");
+      "eval", "Single-step, average multi-step and baseline loss of any dynamics model on a dataset "
+              "(a DeLaN: torque, force-component and energy errors)");
   auto o = std::make_shared<EvalCommandOptions>();
   AddCommonOptions(command, o->common);
   command->add_option("--model", o->model,
-                      "Model file (learned or extended-physics), an analytic model (pendulum, "
+                      "Model file (learned, extended-physics or delan), an analytic model (pendulum, "
                       "cartpole, double-pendulum, arm2, panda) or oracle")
       ->required();
   command->add_option("--data", o->data,

@@ -2,9 +2,12 @@
 // abs-node, res-node) to any dataset (a pushing CSV, a joint-space CSV, a real-data
 // folder) with Adam, the single- or multi-step loss of the data's state metric and
 // a seeded train/validation split, then saves it as a model file that records the
-// system description and the data's median sample interval.
+// system description and the data's median sample interval. `--model delan` fits a
+// deep Lagrangian network (models/delan.h) to the torques of joint-space data
+// instead, with the DeLaN authors' defaults for every option not given.
 //
 //   diffdyn train --data pendulum.csv --model abs-node --epochs 200 --out pendulum.json
+//   diffdyn train --data ../shared/data/delan_characters --model delan --out delan.json
 #include <cmath>
 #include <memory>
 #include <string>
@@ -13,8 +16,10 @@
 
 #include "command.h"
 #include "diffdyn/autodiff_ode/butcher.h"
+#include "diffdyn/models/delan.h"
 #include "diffdyn/models/learned_model.h"
 #include "diffdyn/solvers/dataset_io.h"
+#include "diffdyn/solvers/delan_training.h"
 #include "diffdyn/solvers/training.h"
 #include "joint_layout_options.h"
 
@@ -41,8 +46,68 @@ struct TrainCommandOptions {
   std::string out = "model.json";
 };
 
-void RunTrain(const TrainCommandOptions& o) {
+// The DeLaN authors' value of an option the user did not give.
+template <typename T>
+T OrDefault(const CLI::App& command, const char* name, T given, T fallback) {
+  return command.count(name) > 0 ? given : fallback;
+}
+
+void RunTrainDelan(const TrainCommandOptions& o, const CLI::App& command) {
+  const JointData data = ReadMeasured(o.data);
+  const TrainOptions defaults = DelanTrainDefaults();
+  TrainOptions options = defaults;
+  options.epochs = OrDefault(command, "--epochs", o.epochs, defaults.epochs);
+  options.learning_rate = OrDefault(command, "--lr", o.lr, defaults.learning_rate);
+  options.batch_size = OrDefault(command, "--batch", o.batch, defaults.batch_size);
+  options.val_fraction = o.val_fraction;
+  options.seed = o.common.seed;
+  options.threads = o.threads;
+  options.patience = o.patience;
+  options.progress = !o.common.quiet;
+  const DelanSplit split = SplitForDelan(data, o.val_fraction, o.common.seed);
+  DelanOptions arch;
+  arch.dof = data.dof();
+  arch.hidden = OrDefault(command, "--hidden", o.hidden, arch.hidden);
+  Delan model = Delan::Initialized(arch, o.common.seed);
+  const TrainResult result = TrainDelan(&model, split.train, split.test, options);
+  if (!std::isfinite(result.final_train_loss) || !model.parameters().allFinite()) {
+    throw NumericalError(StrCat("training diverged: the train loss is ", result.final_train_loss,
+                                " (try a smaller --lr); nothing written"));
+  }
+  const nlohmann::json provenance = {
+      {"command", "diffdyn train"}, {"data", o.data},        {"seed", o.common.seed},
+      {"epochs", options.epochs},   {"lr", options.learning_rate}, {"batch", options.batch_size},
+      {"weight_decay", options.weight_decay}, {"amsgrad", options.amsgrad}, {"split", split.how},
+      {"n_train", result.n_train},  {"n_val", result.n_val}, {"epochs_run", result.epochs.size()}};
+  const nlohmann::json metrics = {{"final_train_loss", result.final_train_loss},
+                                  {"final_val_loss", result.final_val_loss},
+                                  {"seconds_per_epoch", result.seconds_per_epoch}};
+  SaveDelan(o.out, model, provenance, metrics);
+  if (o.common.json) {
+    PrintJson({{"model_path", o.out},
+               {"n_train", result.n_train},
+               {"n_val", result.n_val},
+               {"epochs", static_cast<int>(result.epochs.size())},
+               {"stopped_early", result.stopped_early},
+               {"system", data.format},
+               {"seconds_per_epoch", result.seconds_per_epoch},
+               {"final_train_loss", result.final_train_loss},
+               {"final_val_loss", result.final_val_loss},
+               {"model", o.model},
+               {"loss", "torque"},
+               {"parameters", model.num_parameters()}});
+  } else {
+    fmt::print("delan ({} parameters, {} joints) trained on {} samples, validated on {} ({})\n",
+               model.num_parameters(), model.dof(), result.n_train, result.n_val, split.how);
+    fmt::print("final train loss {:.4e}, validation loss {:.4e} (torque MSE), {:.3f} s per epoch\n",
+               result.final_train_loss, result.final_val_loss, result.seconds_per_epoch);
+    fmt::print("saved {}\n", o.out);
+  }
+}
+
+void RunTrain(const TrainCommandOptions& o, const CLI::App& command) {
   CheckDistinct(o.data, "--out", o.out);
+  if (o.model == "delan") return RunTrainDelan(o, command);
   const Dataset dataset = ReadDataset(o.data, ResolveJointLayout(o.layout));
   const SampleIntervals dt = dataset.Intervals();
   LearnedModelConfig config;
@@ -143,7 +208,10 @@ void RegisterTrainCommand(CLI::App& app) {
                       "Dataset: a pushing CSV, a joint-space CSV (t, q, qd, tau) or a real-data folder")
       ->check(InputPath(true))
       ->required();
-  command->add_option("--model", o->model, "Model: abs-nn, res-nn, abs-node or res-node");
+  command->add_option("--model", o->model,
+                      "Model: abs-nn, res-nn, abs-node, res-node (transition models) or delan "
+                      "(inverse dynamics from torques; defaults: the DeLaN authors' 10000 epochs, "
+                      "lr 5e-4, batch 512, hidden 64)");
   command->add_option("--solver", o->solver,
                       "NeuralODE solver: rk4 (3/8 rule), rk4-classic, euler, midpoint, dopri5 "
                       "(tolerance 1e-8)");
@@ -175,7 +243,7 @@ void RegisterTrainCommand(CLI::App& app) {
   AddJointLayoutOptions(command, o->layout);
   command->add_option("--out", o->out, "Model file to write")
       ->check(OutputPath());
-  command->callback([o] { RunTrain(*o); });
+  command->callback([o, command] { RunTrain(*o, *command); });
 }
 
 }  // namespace diffdyn::cli

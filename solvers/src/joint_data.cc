@@ -176,6 +176,22 @@ JointData ReadIbmRun(const fs::path& file) {
 
 JointData ReadDelan(const fs::path& file) {
   JointData data = ReadJointCsv(file.string());
+  // The `character` column names each segment (time restarts at each character).
+  std::ifstream in = OpenInputFile(file.string());
+  std::string line;
+  std::getline(in, line);
+  DIFFDYN_CHECK(SplitCsv(line).front() == "character", file.string(),
+                ":1: the first column must be 'character'");
+  std::vector<std::string> labels;
+  for (int row = 0, segment = 0; std::getline(in, line);) {
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    if (segment < static_cast<int>(data.segment_starts.size()) && row == data.segment_starts[segment]) {
+      labels.push_back(SplitCsv(line).front());
+      ++segment;
+    }
+    ++row;
+  }
+  data.segment_labels = std::move(labels);
   data.format = "delan-characters";
   data.notes = "DeLaN character data (simulated 2-link arm), one segment per character.";
   return data;

@@ -162,9 +162,10 @@ struct Trainer::Chunk {
   }
 };
 
-Trainer::Trainer(DifferentiableTransitionModel* model, const TrainOptions& options)
-    : model_(model), options_(options) {
-  DIFFDYN_CHECK(model != nullptr, "Trainer needs a model");
+namespace {
+
+// Throws diffdyn::Error for options no trainer can run with.
+void CheckTrainOptions(const TrainOptions& options) {
   DIFFDYN_CHECK(options.patience >= 0, "--patience must be >= 0, got ", options.patience);
   DIFFDYN_CHECK(options.epochs >= 1, "--epochs must be >= 1, got ", options.epochs);
   DIFFDYN_CHECK(options.learning_rate > 0 && std::isfinite(options.learning_rate),
@@ -175,6 +176,16 @@ Trainer::Trainer(DifferentiableTransitionModel* model, const TrainOptions& optio
   DIFFDYN_CHECK(options.gamma > 0 && std::isfinite(options.gamma), "--gamma must be positive, got ",
                 options.gamma);
   DIFFDYN_CHECK(options.chunk_size >= 1, "chunk size must be >= 1, got ", options.chunk_size);
+  DIFFDYN_CHECK(options.weight_decay >= 0 && std::isfinite(options.weight_decay),
+                "--weight-decay must be >= 0, got ", options.weight_decay);
+}
+
+}  // namespace
+
+Trainer::Trainer(DifferentiableTransitionModel* model, const TrainOptions& options)
+    : model_(model), options_(options) {
+  DIFFDYN_CHECK(model != nullptr, "Trainer needs a model");
+  CheckTrainOptions(options);
 }
 
 Trainer::~Trainer() = default;
@@ -228,39 +239,31 @@ double Trainer::BatchLossAndGradient(const Windows& data, std::span<const int> i
   return loss;
 }
 
-TrainResult Trainer::Train(const Windows& data,
+TrainResult FitMinibatches(const MinibatchProblem& problem, const TrainOptions& options,
+                           Eigen::VectorXd* theta,
                            const std::function<void(const EpochReport&)>& on_epoch) {
-  CheckModelFits(*model_, data.system, "train");
-  const int n = data.size();
+  DIFFDYN_CHECK(problem.n_train >= 1, "training needs at least one sample");
+  CheckTrainOptions(options);
   TrainResult result;
-  result.n_val = static_cast<int>(std::lround(options_.val_fraction * n));
-  result.n_train = n - result.n_val;
-  DIFFDYN_CHECK(result.n_train >= 1, "Trainer: no training samples left after the split (", n,
-                " windows, --val-fraction ", options_.val_fraction, ")");
-  // Seeded split: a shuffled permutation, validation first.
-  std::vector<int> train_index, val_index;
-  SplitWindows(n, options_.val_fraction, options_.seed, &train_index, &val_index);
-  const Windows val = SelectWindows(data, val_index);
-
-  Adam adam(model_->num_parameters(), {.learning_rate = options_.learning_rate});
-  MiniBatcher batcher(result.n_train, options_.batch_size, /*drop_last=*/false, options_.seed + 1);
-  std::vector<int> batch_index(std::min(options_.batch_size, result.n_train));
-  Eigen::VectorXd grad(model_->num_parameters());
-  ProgressBar bar("train", options_.epochs, options_.progress);
+  result.n_train = problem.n_train;
+  result.n_val = problem.n_val;
+  Adam adam(theta->size(), {.learning_rate = options.learning_rate,
+                            .weight_decay = options.weight_decay,
+                            .amsgrad = options.amsgrad});
+  MiniBatcher batcher(problem.n_train, options.batch_size, /*drop_last=*/false, options.seed + 1);
+  Eigen::VectorXd grad(theta->size());
+  ProgressBar bar("train", options.epochs, options.progress);
   std::vector<double> times;
   double best_val = std::numeric_limits<double>::infinity();
   int since_best = 0;
-  for (int epoch = 1; epoch <= options_.epochs; ++epoch) {
+  for (int epoch = 1; epoch <= options.epochs; ++epoch) {
     batcher.Shuffle();
     const auto start = std::chrono::steady_clock::now();
     double sum = 0.0;
     for (int b = 0; b < batcher.num_batches(); ++b) {
-      const std::span<const int> positions = batcher.Batch(b);
-      for (size_t i = 0; i < positions.size(); ++i) batch_index[i] = train_index[positions[i]];
-      const std::span<const int> index(batch_index.data(), positions.size());
       double loss = 0.0;
       try {
-        loss = BatchLossAndGradient(data, index, &grad);
+        loss = problem.batch_loss(batcher.Batch(b), &grad);
       } catch (const NumericalError& e) {
         throw NumericalError(StrCat("training diverged at epoch ", epoch, ", batch ", b + 1, ": ",
                                     e.what()));
@@ -270,17 +273,16 @@ TrainResult Trainer::Train(const Windows& data,
                                     ": loss = ", loss, (grad.allFinite() ? "" : ", non-finite gradient"),
                                     " (try a smaller --lr)"));
       }
-      adam.Step(grad, &model_->mutable_parameters());
+      adam.Step(grad, theta);
       sum += loss;
     }
     EpochReport report;
     report.epoch = epoch;
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     report.train_loss = sum / batcher.num_batches();
-    report.val_loss = result.n_val > 0
-                          ? RolloutLoss(*model_, val, options_.gamma, options_.threads, options_.chunk_size)
-                          : std::numeric_limits<double>::quiet_NaN();
-    if (result.n_val > 0 && !std::isfinite(report.val_loss)) {
+    report.val_loss = problem.n_val > 0 ? problem.validation_loss()
+                                        : std::numeric_limits<double>::quiet_NaN();
+    if (problem.n_val > 0 && !std::isfinite(report.val_loss)) {
       throw NumericalError(StrCat("validation loss is ", report.val_loss, " after epoch ", epoch));
     }
     times.push_back(report.seconds);
@@ -291,8 +293,8 @@ TrainResult Trainer::Train(const Windows& data,
     if (report.val_loss < best_val) {
       best_val = report.val_loss;
       since_best = 0;
-    } else if (options_.patience > 0 && result.n_val > 0 && ++since_best >= options_.patience) {
-      result.stopped_early = epoch < options_.epochs;
+    } else if (options.patience > 0 && problem.n_val > 0 && ++since_best >= options.patience) {
+      result.stopped_early = epoch < options.epochs;
       break;
     }
   }
@@ -303,6 +305,31 @@ TrainResult Trainer::Train(const Windows& data,
   result.final_train_loss = result.epochs.back().train_loss;
   result.final_val_loss = result.epochs.back().val_loss;
   return result;
+}
+
+TrainResult Trainer::Train(const Windows& data,
+                           const std::function<void(const EpochReport&)>& on_epoch) {
+  CheckModelFits(*model_, data.system, "train");
+  const int n = data.size();
+  const int n_val = static_cast<int>(std::lround(options_.val_fraction * n));
+  DIFFDYN_CHECK(n - n_val >= 1, "Trainer: no training samples left after the split (", n,
+                " windows, --val-fraction ", options_.val_fraction, ")");
+  // Seeded split: a shuffled permutation, validation first.
+  std::vector<int> train_index, val_index;
+  SplitWindows(n, options_.val_fraction, options_.seed, &train_index, &val_index);
+  const Windows val = SelectWindows(data, val_index);
+  std::vector<int> batch_index(std::min(options_.batch_size, n - n_val));
+  MinibatchProblem problem;
+  problem.n_train = n - n_val;
+  problem.n_val = n_val;
+  problem.batch_loss = [&](std::span<const int> positions, Eigen::VectorXd* grad) {
+    for (size_t i = 0; i < positions.size(); ++i) batch_index[i] = train_index[positions[i]];
+    return BatchLossAndGradient(data, std::span<const int>(batch_index.data(), positions.size()), grad);
+  };
+  problem.validation_loss = [&] {
+    return RolloutLoss(*model_, val, options_.gamma, options_.threads, options_.chunk_size);
+  };
+  return FitMinibatches(problem, options_, &model_->mutable_parameters(), on_epoch);
 }
 
 }  // namespace diffdyn

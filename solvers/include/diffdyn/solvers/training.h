@@ -129,6 +129,9 @@ struct TrainOptions {
   double gamma = 0.9;
   /// Seeds the split (Rng(seed)) and the batch order (Rng(seed + 1)).
   std::uint64_t seed = 0;
+  /// Adam's L2 weight decay and AMSGrad (adam.h; off for the paper's models).
+  double weight_decay = 0.0;
+  bool amsgrad = false;
   /// Threads (<= 0: all cores) and the fixed chunk size that makes results independent of them.
   int threads = 0;
   int chunk_size = 250;
@@ -160,6 +163,29 @@ struct TrainResult {
   /// Whether the early stop ended training before options.epochs.
   bool stopped_early = false;
 };
+
+/// A supervised problem for FitMinibatches: n_train training samples addressed by
+/// position 0 .. n_train - 1, and a held-out set of n_val samples.
+struct MinibatchProblem {
+  int n_train = 0;
+  int n_val = 0;
+  /// Mean loss of the training samples at `positions` and its gradient dL/dtheta
+  /// (sized like theta) at the current theta.
+  std::function<double(std::span<const int> positions, Eigen::VectorXd* grad)> batch_loss;
+  /// Loss on the whole held-out set (called after each epoch when n_val > 0).
+  std::function<double()> validation_loss;
+};
+
+/// The mini-batch loop every trainer runs: per epoch a seeded shuffle of the
+/// training positions (Rng(options.seed + 1)), batches of options.batch_size (the
+/// last partial batch kept), one Adam step on *theta per batch (learning rate,
+/// weight decay, AMSGrad from options), the epoch's training loss the mean of its
+/// batch losses, the validation loss after the epoch, a progress bar, and the early
+/// stop of options.patience. A non-finite loss or gradient throws
+/// diffdyn::NumericalError naming the epoch and batch.
+TrainResult FitMinibatches(const MinibatchProblem& problem, const TrainOptions& options,
+                           Eigen::VectorXd* theta,
+                           const std::function<void(const EpochReport&)>& on_epoch = {});
 
 /// Trains a DifferentiableTransitionModel in place with Adam on windows of any horizon
 /// (see the header comment). Keeps its buffers between batches: a batch allocates

@@ -1,0 +1,461 @@
+// Deep Lagrangian networks (DeLaN): inverse dynamics with the Euler-Lagrange
+// structure, learned from torques alone.
+//
+// One deep differential network (mlp.h) maps the joint positions q (n) to
+//
+//   y(q) = [V, o_1 .. o_{n(n-1)/2}, d_1 .. d_n]        (m = 1 + n(n+1)/2 outputs)
+//
+// and, in the same pass, its Jacobian dy/dq (m x n). From them
+//
+//   L     lower triangular, L_ij = o(i, j) below the diagonal (row by row),
+//         L_ii = softplus(d_i + shift) + floor > 0 (a diagonal that cannot die),
+//   H     = L L^T + eps I                                    (mass matrix, n x n)
+//   g     = dV/dq                                            (gravity, n)
+//   L_k   = dL/dq_k,   Ldot = sum_k qd_k L_k
+//   c     = Hdot qd - 1/2 [qd^T (dH/dq_k) qd]_k              (Coriolis, centrifugal)
+//   tau   = H qdd + c + g                                    (inverse dynamics)
+//
+// computed without forming H's derivatives: with a = L^T qd, b = L^T qdd and
+// e = Ldot^T qd,
+//
+//   H qdd = L b + eps qdd,   c = Ldot a + L e - s,   s_k = qd^T L_k a,
+//   T = 1/2 |a|^2 + eps/2 |qd|^2,   dE/dt = a.b + eps qd.qdd + a.e + qd.g.
+//
+// Everything comes from the network's closed-form Jacobian: no finite differences,
+// and no Jets in training. Training minimises (1/B) sum_b |tau^(q, qd, qdd) - tau|^2
+// by batched reverse mode: DelanHead::Backward takes dL/dtau to dL/dy and dL/dJ per
+// sample, and Mlp::Backward takes those to dL/dtheta (through g'' of the
+// activations, mlp.h). The single-sample paths are templated on the scalar (double
+// or ceres::Jet), so a DeLaN can be linearised or integrated with Jets.
+//
+//   Delan model = Delan::Initialized({.dof = 2}, /*seed=*/0);
+//   DelanWorkspace ws;
+//   double loss = model.TorqueLoss(q, qd, qdd, tau, &grad, &ws);   // n x B each
+//   Eigen::VectorXd tau1 = model.InverseDynamics(q0, qd0, qdd0);    // one sample
+//   Eigen::VectorXd acc = model.ForwardDynamics(q0, qd0, tau0);     // H^-1 (tau - c - g)
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <mutex>
+#include <vector>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+
+#include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/parallel.h"
+#include "diffdyn/models/activations.h"
+#include "diffdyn/models/init.h"
+#include "diffdyn/models/json_io.h"
+#include "diffdyn/models/mlp.h"
+#include "diffdyn/models/model_file.h"
+
+namespace diffdyn {
+
+/// Architecture of a DeLaN (what a model file records).
+struct DelanOptions {
+  /// n, the number of joints (>= 1).
+  int dof = 2;
+  /// Width and number of hidden layers of the trunk on q.
+  int hidden = 64;
+  int depth = 2;
+  /// Activation of the trunk (needs g'' for training: softplus, tanh, ...).
+  Activation activation = Activation::Softplus();
+  /// eps of H = L L^T + eps I (> 0: H is positive definite whatever L is).
+  double epsilon = 0.01;
+  /// L_ii = softplus(d_i + diagonal_shift) + diagonal_floor.
+  double diagonal_shift = 2.0;
+  double diagonal_floor = 0.1;
+
+  /// m = 1 + n(n+1)/2 network outputs: V, the n(n-1)/2 entries below L's diagonal, n diagonal inputs.
+  int num_outputs() const { return 1 + dof * (dof + 1) / 2; }
+  /// The trunk and heads as one Mlp architecture: [n, hidden x depth, m].
+  MlpArchitecture NetworkArchitecture() const {
+    std::vector<int> sizes{dof};
+    for (int l = 0; l < depth; ++l) sizes.push_back(hidden);
+    sizes.push_back(num_outputs());
+    return {sizes, std::vector<Activation>(depth, activation)};
+  }
+  /// Throws diffdyn::Error for sizes out of range or eps <= 0.
+  void Validate() const {
+    DIFFDYN_CHECK(dof >= 1 && dof <= 64, "DeLaN: dof must be in [1, 64], got ", dof);
+    DIFFDYN_CHECK(hidden >= 1 && depth >= 1, "DeLaN: hidden width and depth must be >= 1, got ",
+                  hidden, " and ", depth);
+    DIFFDYN_CHECK(epsilon > 0.0 && std::isfinite(epsilon), "DeLaN: epsilon must be positive, got ",
+                  epsilon);
+    DIFFDYN_CHECK(std::isfinite(diagonal_shift) && diagonal_floor >= 0.0 && std::isfinite(diagonal_floor),
+                  "DeLaN: diagonal shift must be finite and floor >= 0, got ", diagonal_shift, " and ",
+                  diagonal_floor);
+  }
+};
+
+/// Per-sample part of DeLaN on scalar S: from the network's y (m) and J = dy/dq
+/// (m x n) to L, its derivatives, and tau with its parts. Owns its buffers, so
+/// repeated Forward calls of one size allocate nothing. Backward (the VJP) needs
+/// the preceding Forward's buffers.
+template <typename S>
+class DelanHead {
+ public:
+  using Vec = Eigen::Matrix<S, Eigen::Dynamic, 1>;
+  using Mat = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
+
+  explicit DelanHead(const DelanOptions& options) : o_(options), n_(options.dof) {
+    L_ = Mat::Zero(n_, n_);
+    Ldot_ = Mat::Zero(n_, n_);
+    Lk_.assign(n_, Mat::Zero(n_, n_));
+    Lkbar_ = Lk_;
+    Lbar_ = ldot_bar_ = L_;
+    sig_ = bbar_ = abar_ = Vec::Zero(n_);
+    g_ = a_ = b_ = e_ = s_ = inertial_ = coriolis_ = qd_ = qdd_ = Vec::Zero(n_);
+  }
+
+  /// n.
+  int dof() const { return n_; }
+  /// Index of L(i, j), i > j, and of d_i in y.
+  static int Off(int i, int j) { return 1 + i * (i - 1) / 2 + j; }
+  int Diag(int i) const { return 1 + n_ * (n_ - 1) / 2 + i; }
+
+  /// Builds L, dL/dq_k and g from y (m) and J (m x n), then the parts of tau for (qd, qdd).
+  template <typename Y, typename J, typename V1, typename V2>
+  void Forward(const Y& y, const J& jac, const V1& qd, const V2& qdd) {
+    using std::exp;
+    potential_ = y[0];
+    for (int i = 0; i < n_; ++i) {
+      const S z = y[Diag(i)] + S(o_.diagonal_shift);
+      sig_[i] = ActivationDerivative(Activation::Softplus(), z);
+      L_(i, i) = ActivationValue(Activation::Softplus(), z) + S(o_.diagonal_floor);
+      for (int j = 0; j < i; ++j) L_(i, j) = y[Off(i, j)];
+    }
+    for (int k = 0; k < n_; ++k) {
+      g_[k] = jac(0, k);
+      Mat& lk = Lk_[k];
+      for (int i = 0; i < n_; ++i) {
+        lk(i, i) = sig_[i] * jac(Diag(i), k);
+        for (int j = 0; j < i; ++j) lk(i, j) = jac(Off(i, j), k);
+      }
+    }
+    qd_ = qd.template cast<S>();
+    qdd_ = qdd.template cast<S>();
+    Ldot_.setZero();
+    for (int k = 0; k < n_; ++k) Ldot_ += qd_[k] * Lk_[k];
+    a_.noalias() = L_.transpose() * qd_;
+    b_.noalias() = L_.transpose() * qdd_;
+    e_.noalias() = Ldot_.transpose() * qd_;
+    for (int k = 0; k < n_; ++k) s_[k] = qd_.dot(Lk_[k] * a_);
+    inertial_.noalias() = L_ * b_;
+    inertial_ += S(o_.epsilon) * qdd_;
+    coriolis_.noalias() = Ldot_ * a_;
+    coriolis_.noalias() += L_ * e_;
+    coriolis_ -= s_;
+  }
+
+  /// tau = H qdd + c + g of the last Forward, into *tau (size n).
+  template <typename Out>
+  void Torque(Out&& tau) const { tau = inertial_ + coriolis_ + g_; }
+
+  /// VJP of tau: given tbar = dL/dtau (n), writes dL/dy into ybar (m) and dL/dJ
+  /// into jbar (m x n) for the last Forward (reverse of the equations above).
+  template <typename T1, typename Y, typename J, typename YB, typename JB>
+  void Backward(const T1& tbar, const Y& y, const J& jac, YB&& ybar, JB&& jbar) {
+    (void)y;
+    // tau = L (b + e) + eps qdd + Ldot a - s + g, with b = L^T qdd, e = Ldot^T qd, a = L^T qd.
+    Lbar_.noalias() = tbar * (b_ + e_).transpose();
+    bbar_.noalias() = L_.transpose() * tbar;  // also ebar
+    ldot_bar_.noalias() = tbar * a_.transpose();
+    ldot_bar_.noalias() += qd_ * bbar_.transpose();
+    abar_.noalias() = Ldot_.transpose() * tbar;
+    for (int k = 0; k < n_; ++k) {
+      // s_k = qd^T L_k a, and L_k's share of Ldot = sum_k qd_k L_k.
+      Lkbar_[k].noalias() = (-tbar[k]) * qd_ * a_.transpose();
+      Lkbar_[k] += qd_[k] * ldot_bar_;
+      abar_.noalias() -= tbar[k] * (Lk_[k].transpose() * qd_);
+    }
+    Lbar_.noalias() += qdd_ * bbar_.transpose();
+    Lbar_.noalias() += qd_ * abar_.transpose();
+    ybar.setZero();
+    jbar.setZero();
+    for (int k = 0; k < n_; ++k) jbar(0, k) = tbar[k];
+    for (int i = 0; i < n_; ++i) {
+      const S dsig = sig_[i] * (S(1.0) - sig_[i]);
+      S d_bar = Lbar_(i, i) * sig_[i];
+      for (int k = 0; k < n_; ++k) {
+        d_bar += Lkbar_[k](i, i) * dsig * jac(Diag(i), k);
+        jbar(Diag(i), k) = Lkbar_[k](i, i) * sig_[i];
+        for (int j = 0; j < i; ++j) jbar(Off(i, j), k) = Lkbar_[k](i, j);
+      }
+      ybar[Diag(i)] = d_bar;
+      for (int j = 0; j < i; ++j) ybar[Off(i, j)] = Lbar_(i, j);
+    }
+  }
+
+  /// Results of the last Forward.
+  const Mat& L() const { return L_; }
+  /// dL/dq_k.
+  const Mat& Lk(int k) const { return Lk_[k]; }
+  /// H = L L^T + eps I.
+  Mat MassMatrix() const {
+    Mat h = L_ * L_.transpose();
+    h.diagonal().array() += S(o_.epsilon);
+    return h;
+  }
+  /// H qdd, c, g.
+  const Vec& inertial() const { return inertial_; }
+  const Vec& coriolis() const { return coriolis_; }
+  const Vec& gravity() const { return g_; }
+  /// V (up to a constant), T = 1/2 qd^T H qd.
+  S potential() const { return potential_; }
+  S kinetic() const { return S(0.5) * (a_.squaredNorm() + S(o_.epsilon) * qd_.squaredNorm()); }
+  /// dE/dt = qd^T H qdd + 1/2 qd^T Hdot qd + qd^T g.
+  S power() const { return a_.dot(b_) + S(o_.epsilon) * qd_.dot(qdd_) + a_.dot(e_) + qd_.dot(g_); }
+
+ private:
+  DelanOptions o_;
+  int n_;
+  Mat L_, Ldot_, Lbar_, ldot_bar_;
+  std::vector<Mat> Lk_, Lkbar_;
+  Vec sig_, bbar_, abar_, g_, a_, b_, e_, s_, inertial_, coriolis_, qd_, qdd_;
+  S potential_{};
+};
+
+/// Buffers of the batched DeLaN paths (one per concurrent caller).
+struct DelanWorkspace {
+  MlpWorkspace mlp;
+  Eigen::MatrixXd y, jac, ybar, jbar;
+  std::vector<DelanHead<double>> heads;  // one per chunk
+  std::vector<double> chunk_loss;
+};
+
+/// The DeLaN parts of a batch (n x B each, energies 1 x B).
+struct DelanParts {
+  Eigen::MatrixXd torque, inertial, coriolis, gravity;
+  Eigen::RowVectorXd kinetic, potential, power, min_mass_eigenvalue;
+};
+
+/// A deep Lagrangian network: one Mlp<double> (the trunk and the heads' linear
+/// outputs) plus the structure of delan.h. Parameters are the Mlp's flat theta.
+class Delan {
+ public:
+  /// The DeLaN authors' initialisation: xavier-normal, hidden gain sqrt(2),
+  /// output gain 0.125, bias 1e-4.
+  static InitOptions DefaultInit() { return {InitScheme::kXavierNormal, std::sqrt(2.0), 0.125, 1e-4}; }
+
+  /// A DeLaN with parameters drawn by DefaultInit from Rng(seed).
+  static Delan Initialized(const DelanOptions& options, std::uint64_t seed) {
+    options.Validate();
+    return Delan(options, MakeInitializedMlp(options.NetworkArchitecture(), DefaultInit(), seed).parameters());
+  }
+
+  Delan() = default;
+  /// A DeLaN with flat parameters theta (size num_parameters()).
+  Delan(const DelanOptions& options, Eigen::VectorXd theta) : options_(options) {
+    options.Validate();
+    net_ = Mlp<double>(options.NetworkArchitecture(), std::move(theta));
+  }
+
+  const DelanOptions& options() const { return options_; }
+  int dof() const { return options_.dof; }
+  const Mlp<double>& network() const { return net_; }
+  Eigen::Index num_parameters() const { return net_.num_parameters(); }
+  const Eigen::VectorXd& parameters() const { return net_.parameters(); }
+  Eigen::VectorXd& mutable_parameters() { return net_.mutable_parameters(); }
+
+  /// tau = H(q) qdd + c(q, qd) + g(q) of one sample, on double or Jets.
+  template <typename S>
+  Eigen::Matrix<S, Eigen::Dynamic, 1> InverseDynamics(const Eigen::Matrix<S, Eigen::Dynamic, 1>& q,
+                                                      const Eigen::Matrix<S, Eigen::Dynamic, 1>& qd,
+                                                      const Eigen::Matrix<S, Eigen::Dynamic, 1>& qdd) const {
+    DelanHead<S> head = Head(q, qd, qdd);
+    Eigen::Matrix<S, Eigen::Dynamic, 1> tau(dof());
+    head.Torque(tau);
+    return tau;
+  }
+
+  /// qdd = H^-1 (tau - c - g) by a Cholesky solve (H is positive definite), on double or Jets.
+  template <typename S>
+  Eigen::Matrix<S, Eigen::Dynamic, 1> ForwardDynamics(const Eigen::Matrix<S, Eigen::Dynamic, 1>& q,
+                                                      const Eigen::Matrix<S, Eigen::Dynamic, 1>& qd,
+                                                      const Eigen::Matrix<S, Eigen::Dynamic, 1>& tau) const {
+    using Vec = Eigen::Matrix<S, Eigen::Dynamic, 1>;
+    DelanHead<S> head = Head(q, qd, Vec::Zero(dof()).eval());
+    const Vec rhs = tau - head.coriolis() - head.gravity();
+    return head.MassMatrix().llt().solve(rhs);
+  }
+
+  /// The full per-sample head (L, H, c, g, energies) of one sample.
+  template <typename S>
+  DelanHead<S> Head(const Eigen::Matrix<S, Eigen::Dynamic, 1>& q, const Eigen::Matrix<S, Eigen::Dynamic, 1>& qd,
+                    const Eigen::Matrix<S, Eigen::Dynamic, 1>& qdd) const {
+    DIFFDYN_CHECK(q.size() == dof() && qd.size() == dof() && qdd.size() == dof(), "DeLaN: expected ",
+                  dof(), " joints, got q, qd, qdd of sizes ", q.size(), ", ", qd.size(), ", ", qdd.size());
+    Eigen::Matrix<S, Eigen::Dynamic, 1> y;
+    Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic> jac;
+    net_.ValueAndJacobian(q, &y, &jac);
+    DelanHead<S> head(options_);
+    head.Forward(y, jac, qd, qdd);
+    return head;
+  }
+
+  /// Training loss (1/B) sum_b |tau^_b - tau_b|^2 over the batch (q, qd, qdd, tau:
+  /// n x B) and, if grad is not null, dL/dtheta (resized). Chunks of
+  /// ws->mlp.chunk_size() samples on `threads` threads (<= 0: all cores), summed in
+  /// chunk order: the same result at any thread count.
+  double TorqueLoss(const Eigen::MatrixXd& q, const Eigen::MatrixXd& qd, const Eigen::MatrixXd& qdd,
+                    const Eigen::MatrixXd& tau, Eigen::VectorXd* grad, DelanWorkspace* ws,
+                    int threads = 0) const {
+    const int batch = static_cast<int>(q.cols());
+    CheckBatch(q, qd, qdd, batch);
+    DIFFDYN_CHECK(tau.rows() == dof() && tau.cols() == batch, "DeLaN: tau must be ", dof(), " x ", batch);
+    net_.Forward(q, &ws->y, &ws->jac, &ws->mlp, threads);
+    const int n = dof(), chunk = ws->mlp.chunk_size(), chunks = NumChunks(batch, chunk);
+    PrepareHeads(ws, chunks);
+    if (grad) {
+      ws->ybar.resize(ws->y.rows(), batch);
+      ws->jbar.resize(ws->jac.rows(), ws->jac.cols());
+    }
+    const double scale = 1.0 / batch;
+    ParallelForChunks(batch, chunk, threads, [&](int c, int begin, int end) {
+      DelanHead<double>& head = ws->heads[c];
+      Eigen::VectorXd tau_hat(n), tbar(n);
+      double sum = 0.0;
+      for (int b = begin; b < end; ++b) {
+        const auto jb = ws->jac.middleCols(Eigen::Index(b) * n, n);
+        head.Forward(ws->y.col(b), jb, qd.col(b), qdd.col(b));
+        head.Torque(tau_hat);
+        tbar = tau_hat - tau.col(b);
+        sum += tbar.squaredNorm();
+        if (!grad) continue;
+        tbar *= 2.0 * scale;
+        head.Backward(tbar, ws->y.col(b), jb, ws->ybar.col(b), ws->jbar.middleCols(Eigen::Index(b) * n, n));
+      }
+      ws->chunk_loss[c] = sum;
+    });
+    double loss = 0.0;
+    for (int c = 0; c < chunks; ++c) loss += ws->chunk_loss[c];
+    if (grad) net_.Backward(ws->ybar, ws->jbar, grad, nullptr, &ws->mlp, threads);
+    return loss * scale;
+  }
+
+  /// tau^ and its parts for the batch (q, qd, qdd: n x B), with the energies, the
+  /// power dE/dt and the smallest eigenvalue of H per sample.
+  DelanParts Decompose(const Eigen::MatrixXd& q, const Eigen::MatrixXd& qd, const Eigen::MatrixXd& qdd,
+                       DelanWorkspace* ws, int threads = 0) const {
+    const int batch = static_cast<int>(q.cols()), n = dof();
+    CheckBatch(q, qd, qdd, batch);
+    net_.Forward(q, &ws->y, &ws->jac, &ws->mlp, threads);
+    const int chunk = ws->mlp.chunk_size(), chunks = NumChunks(batch, chunk);
+    PrepareHeads(ws, chunks);
+    DelanParts p;
+    for (Eigen::MatrixXd* m : {&p.torque, &p.inertial, &p.coriolis, &p.gravity}) m->resize(n, batch);
+    for (Eigen::RowVectorXd* r : {&p.kinetic, &p.potential, &p.power, &p.min_mass_eigenvalue}) r->resize(batch);
+    ParallelForChunks(batch, chunk, threads, [&](int c, int begin, int end) {
+      DelanHead<double>& head = ws->heads[c];
+      for (int b = begin; b < end; ++b) {
+        head.Forward(ws->y.col(b), ws->jac.middleCols(Eigen::Index(b) * n, n), qd.col(b), qdd.col(b));
+        head.Torque(p.torque.col(b));
+        p.inertial.col(b) = head.inertial();
+        p.coriolis.col(b) = head.coriolis();
+        p.gravity.col(b) = head.gravity();
+        p.kinetic[b] = head.kinetic();
+        p.potential[b] = head.potential();
+        p.power[b] = head.power();
+        p.min_mass_eigenvalue[b] =
+            Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(head.MassMatrix(), Eigen::EigenvaluesOnly)
+                .eigenvalues()[0];
+      }
+    });
+    return p;
+  }
+
+ private:
+  void CheckBatch(const Eigen::MatrixXd& q, const Eigen::MatrixXd& qd, const Eigen::MatrixXd& qdd,
+                  int batch) const {
+    DIFFDYN_CHECK(batch > 0 && q.rows() == dof() && qd.rows() == dof() && qdd.rows() == dof() &&
+                      qd.cols() == batch && qdd.cols() == batch,
+                  "DeLaN: q, qd, qdd must be ", dof(), " x B with one B, got ", q.rows(), " x ", q.cols(),
+                  ", ", qd.rows(), " x ", qd.cols(), ", ", qdd.rows(), " x ", qdd.cols());
+  }
+  void PrepareHeads(DelanWorkspace* ws, int chunks) const {
+    if (!ws->heads.empty() && ws->heads.front().dof() != dof()) ws->heads.clear();
+    while (static_cast<int>(ws->heads.size()) < chunks) ws->heads.emplace_back(options_);
+    ws->chunk_loss.assign(chunks, 0.0);
+  }
+
+  DelanOptions options_;
+  Mlp<double> net_;
+};
+
+/// The "delan" architecture object of a model file:
+/// {"dof", "epsilon", "diagonal_shift", "diagonal_floor", "mlp": {...}}.
+inline nlohmann::json DelanArchitectureToJson(const DelanOptions& o) {
+  return {{"dof", o.dof},
+          {"epsilon", o.epsilon},
+          {"diagonal_shift", o.diagonal_shift},
+          {"diagonal_floor", o.diagonal_floor},
+          {"mlp", MlpArchitectureToJson(o.NetworkArchitecture())}};
+}
+
+/// DelanOptions from a "delan" architecture object; throws diffdyn::Error naming the bad field.
+inline DelanOptions DelanArchitectureFromJson(const nlohmann::json& j) {
+  DIFFDYN_CHECK(j.is_object(), "architecture must be an object");
+  for (const char* key : {"dof", "epsilon", "diagonal_shift", "diagonal_floor", "mlp"}) {
+    DIFFDYN_CHECK(j.contains(key), "architecture: missing '", key, "'");
+  }
+  for (const char* key : {"epsilon", "diagonal_shift", "diagonal_floor"}) {
+    DIFFDYN_CHECK(j[key].is_number(), "architecture: '", key, "' must be a number");
+  }
+  DelanOptions o;
+  o.dof = static_cast<int>(JsonInt(j["dof"], 1, 64, "architecture: 'dof'"));
+  o.epsilon = j["epsilon"].get<double>();
+  o.diagonal_shift = j["diagonal_shift"].get<double>();
+  o.diagonal_floor = j["diagonal_floor"].get<double>();
+  const MlpArchitecture mlp = MlpArchitectureFromJson(j["mlp"]);
+  DIFFDYN_CHECK(mlp.sizes.size() >= 3 && !mlp.activations.empty(),
+                "architecture: 'mlp' needs at least one hidden layer");
+  o.hidden = mlp.sizes[1];
+  o.depth = static_cast<int>(mlp.sizes.size()) - 2;
+  o.activation = mlp.activations.front();
+  o.Validate();
+  DIFFDYN_CHECK(mlp == o.NetworkArchitecture(), "architecture: 'mlp' is not a DeLaN network for ",
+                o.dof, " joints (sizes [dof, hidden..., ", o.num_outputs(), "], one activation)");
+  return o;
+}
+
+/// Registers the kind "delan" with the model-file loader (idempotent).
+inline void RegisterDelanKind() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    RegisterModelKind("delan", [](const nlohmann::json& j) {
+      return DelanArchitectureFromJson(j).NetworkArchitecture().num_parameters();
+    });
+  });
+}
+
+/// Saves `model` atomically as a model file of kind "delan".
+inline void SaveDelan(const std::filesystem::path& path, const Delan& model,
+                      const nlohmann::json& provenance = nlohmann::json::object(),
+                      const nlohmann::json& metrics = nlohmann::json::object()) {
+  RegisterDelanKind();
+  SaveModelFile(path, ModelFile{"delan", DelanArchitectureToJson(model.options()), model.parameters(),
+                                provenance, metrics, nullptr});
+}
+
+/// Loads a model file of kind "delan"; throws diffdyn::Error with one line naming the path.
+inline Delan LoadDelan(const std::filesystem::path& path, ModelFile* contents = nullptr) {
+  RegisterDelanKind();
+  ModelFile file = LoadModelFile(path);
+  DIFFDYN_CHECK(file.kind == "delan", path.string(), ": model kind is '", file.kind, "', expected delan");
+  DelanOptions options;
+  try {
+    options = DelanArchitectureFromJson(file.architecture);
+  } catch (const Error& e) {
+    throw Error(StrCat(path.string(), ": ", e.what()));
+  }
+  Delan model(options, file.parameters);
+  if (contents) *contents = std::move(file);
+  return model;
+}
+
+}  // namespace diffdyn

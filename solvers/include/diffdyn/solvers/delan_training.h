@@ -1,0 +1,70 @@
+// Training and scoring DeLaN (models/delan.h) on joint-space measurements.
+//
+// Data: any JointData with q, qd, tau and qdd. Where qdd was not measured it is
+// estimated as `diagnose` does (smoothing.h, 10 Hz cutoff: q, qd, tau smoothed
+// alike, qdd the derivative of the smoothed qd).
+//
+// Split: on the DeLaN characters (format "delan-characters") the authors' split,
+// the characters e, q and v held out for testing and the other 17 for training;
+// on other data a seeded split of the samples (SplitWindows over samples,
+// val_fraction of them held out).
+//
+// Training: FitMinibatches (training.h) on the torque loss
+// (1/B) sum_b |tau^_b - tau_b|^2, validated on the held-out samples, with the
+// DeLaN authors' defaults in DelanTrainDefaults (Adam with AMSGrad, lr 5e-4, L2
+// weight decay 1e-5, batch 512).
+//
+// Scores (DESIGN.md, eval): *_mse = (1/N) sum_samples sum_joints (y^ - y)^2 for the
+// torque and, where the data has ground-truth channels, H qdd ("m"), c, g, the
+// energies (potential offset-matched); power_mse against qd^T tau; *_nmse the same
+// divided by the total variance; the smallest eigenvalue of H over the samples.
+//
+//   JointData data = ReadMeasured("../shared/data/delan_characters");
+//   DelanSplit split = SplitForDelan(data, 0.2, seed);
+//   Delan model = Delan::Initialized({.dof = data.dof()}, seed);
+//   TrainResult r = TrainDelan(&model, split.train, split.test, DelanTrainDefaults());
+//   DelanScores s = ScoreDelan(model, split.test);
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <string>
+
+#include "diffdyn/models/delan.h"
+#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/solvers/training.h"
+
+namespace diffdyn {
+
+/// Training and held-out samples, with how they were chosen.
+struct DelanSplit {
+  JointData train, test;
+  /// "characters e, q, v held out" or "seeded split of samples".
+  std::string how;
+};
+
+/// `data` with qdd (estimated when absent, see the header comment).
+JointData WithAccelerations(const JointData& data);
+
+/// The samples `index` of `data` (q, qd, qdd, tau and the channels), as one segment.
+JointData SelectSamples(const JointData& data, const std::vector<int>& index);
+
+/// The split of the header comment; throws diffdyn::Error when a side would be empty.
+DelanSplit SplitForDelan(const JointData& data, double val_fraction, std::uint64_t seed);
+
+/// The DeLaN authors' training settings: 10,000 epochs of batch 512, Adam with
+/// AMSGrad, learning rate 5e-4, weight decay 1e-5.
+TrainOptions DelanTrainDefaults();
+
+/// Trains *model in place on `train`, validating on `val` (may be empty: no
+/// validation). Throws diffdyn::Error for data of another dof or without qdd.
+TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& val,
+                       const TrainOptions& options,
+                       const std::function<void(const EpochReport&)>& on_epoch = {});
+
+/// The scores of the header comment, by key ("torque_mse", "inertial_mse", ...,
+/// "torque_nmse", ..., "min_mass_eigenvalue"); keys for channels the data lacks are absent.
+std::map<std::string, double> ScoreDelan(const Delan& model, const JointData& data, int threads = 0);
+
+}  // namespace diffdyn

@@ -1,0 +1,165 @@
+#include "diffdyn/solvers/delan_training.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/solvers/smoothing.h"
+
+namespace diffdyn {
+namespace {
+
+// The characters the DeLaN authors hold out.
+bool IsTestCharacter(const std::string& label) { return label == "e" || label == "q" || label == "v"; }
+
+// (1/N) sum_samples sum_rows (a - b)^2 and the same over the total variance of b.
+void AddScore(const std::string& key, const Eigen::MatrixXd& predicted, const Eigen::MatrixXd& truth,
+              std::map<std::string, double>* scores) {
+  const double n = static_cast<double>(truth.cols());
+  const double mse = (predicted - truth).squaredNorm() / n;
+  const Eigen::VectorXd mean = truth.rowwise().mean();
+  const double variance = (truth.colwise() - mean).squaredNorm() / n;
+  (*scores)[key + "_mse"] = mse;
+  (*scores)[key + "_nmse"] = variance > 0 ? mse / variance : std::numeric_limits<double>::quiet_NaN();
+  if (!(variance > 0)) scores->erase(key + "_nmse");
+}
+
+}  // namespace
+
+JointData WithAccelerations(const JointData& data) {
+  if (data.qdd.cols() == data.size() && data.qdd.rows() == data.dof()) return data;
+  const SmoothedData s = SmoothJointData(data, 10.0);
+  JointData out = data;
+  out.q = s.q;
+  out.qd = s.qd;
+  out.qdd = s.qdd;
+  out.tau = s.tau;
+  out.notes += " qdd estimated (10 Hz smoothing, as diagnose).";
+  return out;
+}
+
+JointData SelectSamples(const JointData& data, const std::vector<int>& index) {
+  JointData out;
+  out.path = data.path;
+  out.format = data.format;
+  out.has_qd = data.has_qd;
+  out.has_tau = data.has_tau;
+  const int count = static_cast<int>(index.size());
+  const auto pick = [&](const Eigen::MatrixXd& m) {
+    Eigen::MatrixXd r(m.rows(), count);
+    for (int i = 0; i < count; ++i) r.col(i) = m.col(index[i]);
+    return r;
+  };
+  out.t.resize(count);
+  for (int i = 0; i < count; ++i) out.t[i] = i;
+  out.q = pick(data.q);
+  out.qd = pick(data.qd);
+  out.tau = pick(data.tau);
+  if (data.qdd.cols() == data.size()) out.qdd = pick(data.qdd);
+  for (const auto& [name, m] : data.channels) out.channels[name] = pick(m);
+  out.notes = data.notes;
+  return out;
+}
+
+DelanSplit SplitForDelan(const JointData& data, double val_fraction, std::uint64_t seed) {
+  const JointData full = WithAccelerations(data);
+  std::vector<int> train, test;
+  DelanSplit split;
+  if (data.format == "delan-characters" && !data.segment_labels.empty()) {
+    for (size_t s = 0; s < data.segment_starts.size(); ++s) {
+      const int end = s + 1 < data.segment_starts.size() ? data.segment_starts[s + 1] : data.size();
+      std::vector<int>& side = IsTestCharacter(data.segment_labels[s]) ? test : train;
+      for (int i = data.segment_starts[s]; i < end; ++i) side.push_back(i);
+    }
+    split.how = "characters e, q, v held out";
+  } else {
+    SplitWindows(data.size(), val_fraction, seed, &train, &test);
+    std::sort(train.begin(), train.end());
+    std::sort(test.begin(), test.end());
+    split.how = "seeded split of samples";
+  }
+  DIFFDYN_CHECK(!train.empty() && !test.empty(), data.path, ": the split leaves ", train.size(),
+                " training and ", test.size(), " held-out samples (--val-fraction ", val_fraction, ")");
+  split.train = SelectSamples(full, train);
+  split.test = SelectSamples(full, test);
+  return split;
+}
+
+TrainOptions DelanTrainDefaults() {
+  TrainOptions o;
+  o.epochs = 10000;
+  o.batch_size = 512;
+  o.learning_rate = 5e-4;
+  o.weight_decay = 1e-5;
+  o.amsgrad = true;
+  o.chunk_size = 256;
+  return o;
+}
+
+TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& val,
+                       const TrainOptions& options,
+                       const std::function<void(const EpochReport&)>& on_epoch) {
+  for (const JointData* d : {&train, &val}) {
+    if (d->size() == 0 && d == &val) continue;
+    DIFFDYN_CHECK(d->dof() == model->dof(), d->path, ": ", d->dof(), " joints, the DeLaN has ",
+                  model->dof());
+    DIFFDYN_CHECK(d->qdd.cols() == d->size(), d->path, ": DeLaN needs accelerations qdd");
+  }
+  const int n = model->dof();
+  const int batch = std::min(options.batch_size, train.size());
+  DelanWorkspace ws, val_ws;
+  ws.mlp = MlpWorkspace(model->network().architecture(), batch, options.chunk_size, true);
+  Eigen::MatrixXd q(n, batch), qd(n, batch), qdd(n, batch), tau(n, batch);
+  MinibatchProblem problem;
+  problem.n_train = train.size();
+  problem.n_val = val.size();
+  problem.batch_loss = [&](std::span<const int> positions, Eigen::VectorXd* grad) {
+    const int b = static_cast<int>(positions.size());
+    for (Eigen::MatrixXd* m : {&q, &qd, &qdd, &tau}) m->resize(n, b);  // no-op unless b changes
+    for (int i = 0; i < b; ++i) {
+      q.col(i) = train.q.col(positions[i]);
+      qd.col(i) = train.qd.col(positions[i]);
+      qdd.col(i) = train.qdd.col(positions[i]);
+      tau.col(i) = train.tau.col(positions[i]);
+    }
+    return model->TorqueLoss(q, qd, qdd, tau, grad, &ws, options.threads);
+  };
+  problem.validation_loss = [&] {
+    return model->TorqueLoss(val.q, val.qd, val.qdd, val.tau, nullptr, &val_ws, options.threads);
+  };
+  return FitMinibatches(problem, options, &model->mutable_parameters(), on_epoch);
+}
+
+std::map<std::string, double> ScoreDelan(const Delan& model, const JointData& data, int threads) {
+  DIFFDYN_CHECK(data.dof() == model.dof(), data.path, ": ", data.dof(), " joints, the DeLaN has ",
+                model.dof());
+  DIFFDYN_CHECK(data.size() > 0 && data.qdd.cols() == data.size(), data.path,
+                ": DeLaN scores need samples with accelerations qdd");
+  DelanWorkspace ws;
+  const DelanParts p = model.Decompose(data.q, data.qd, data.qdd, &ws, threads);
+  std::map<std::string, double> scores;
+  scores["n_samples"] = data.size();
+  AddScore("torque", p.torque, data.tau, &scores);
+  const auto channel = [&](const char* name) -> const Eigen::MatrixXd* {
+    const auto it = data.channels.find(name);
+    return it == data.channels.end() ? nullptr : &it->second;
+  };
+  if (const auto* m = channel("m")) AddScore("inertial", p.inertial, *m, &scores);
+  if (const auto* c = channel("c")) AddScore("coriolis", p.coriolis, *c, &scores);
+  if (const auto* g = channel("g")) AddScore("gravity", p.gravity, *g, &scores);
+  if (const auto* f = channel("f")) AddScore("friction", Eigen::MatrixXd::Zero(f->rows(), f->cols()), *f, &scores);
+  if (const auto* k = channel("kinetic")) AddScore("kinetic", p.kinetic, *k, &scores);
+  if (const auto* v = channel("potential")) {
+    // V is identifiable up to a constant: match the means.
+    const double offset = v->mean() - p.potential.mean();
+    AddScore("potential", (p.potential.array() + offset).matrix(), *v, &scores);
+  }
+  // Power: dE^/dt against the measured qd^T tau.
+  const Eigen::RowVectorXd measured = (data.qd.array() * data.tau.array()).colwise().sum();
+  AddScore("power", p.power, measured, &scores);
+  scores["min_mass_eigenvalue"] = p.min_mass_eigenvalue.minCoeff();
+  return scores;
+}
+
+}  // namespace diffdyn
