@@ -12,11 +12,10 @@ Prints the BLAS torch uses and, if the C++ results of the same run are next to
 import argparse
 import json
 import os
-import time
 
 import torch
 
-from torch_common import blas_in_use
+from torch_common import blas_in_use, time_it
 
 BATCH = 1000
 
@@ -57,20 +56,6 @@ def closed_form_chain(params, x):
         else:
             jac = u
     return jac
-
-
-def time_it(fn, repeats=30):
-    """Median wall and process CPU seconds (CPU time is robust when other jobs share the cores)."""
-    fn()
-    times, cpu = [], []
-    for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.process_time()
-        fn()
-        times.append(time.perf_counter() - t0)
-        cpu.append(time.process_time() - c0)
-    times.sort()
-    cpu.sort()
-    return times[len(times) // 2], cpu[len(cpu) // 2]
 
 
 def main():

@@ -4,6 +4,7 @@ import csv
 import math
 import os
 import sys
+import time
 
 import torch
 
@@ -67,3 +68,17 @@ def se2_pose_loss(pred, target):
     """MSE x + MSE y + rg MSE theta over a batch of poses (n x 3)."""
     d2 = (pred - target) ** 2
     return d2[:, 0].mean() + d2[:, 1].mean() + POSE_RG * d2[:, 2].mean()
+
+
+def time_it(fn, repeats=30):
+    """Median wall and process CPU seconds (CPU time is robust when other jobs share the cores)."""
+    fn()
+    times, cpu = [], []
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    times.sort()
+    cpu.sort()
+    return times[len(times) // 2], cpu[len(cpu) // 2]

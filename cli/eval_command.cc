@@ -16,7 +16,10 @@
 // A DeLaN model file (kind "delan") is scored as inverse dynamics instead: on the
 // DeLaN characters the test characters e, q, v, on other joint-space data every
 // sample; the torque, force-component, energy and power errors of DESIGN.md
-// (`torque_mse`, `inertial_mse`, ..., `*_nmse`) and `min_mass_eigenvalue`.
+// (`torque_mse`, `inertial_mse`, ..., `*_nmse`) and `min_mass_eigenvalue`; and,
+// rolled out as a dynamics model (forward dynamics, --solver and --substeps), the
+// `single_step_loss`, `avg_multi_step_loss` (4 steps), `avg_10_step_loss` and the
+// `baseline_single_step_loss` of "the state stays".
 #include <cmath>
 #include <filesystem>
 #include <memory>
@@ -82,6 +85,32 @@ bool IsDelanFile(const std::string& spec) {
   return j.is_object() && j.contains("kind") && j["kind"] == "delan";
 }
 
+// The DeLaN as a dynamics model (forward dynamics through the continuous-time
+// adapter, each transition over its own interval): the single-step, average 4-step
+// and average 10-step losses of the state metric on the same samples as the scores.
+void AddDelanRollouts(const EvalCommandOptions& o, bool test_characters_only,
+                      std::map<std::string, double>* scores) {
+  Dataset data = ReadDataset(o.data, JointLayout{.all_actuated = true});
+  if (test_characters_only) {
+    std::erase_if(data.trajectories, [](const Trajectory& t) {
+      return t.label != "e" && t.label != "q" && t.label != "v";
+    });
+  }
+  LoadModelOptions load;
+  load.dt = data.Intervals().median;
+  load.substeps = o.substeps;
+  if (o.solver_given) load.method = ParseMethod(o.solver);
+  const std::unique_ptr<TransitionModel> model = LoadTransitionModel(o.model, load);
+  const Dataset fitted = DatasetForModel(data, model->description(), "--model " + o.model);
+  const Windows single = MakeWindows(fitted, 1);
+  (*scores)["single_step_loss"] = RolloutLoss(*model, single, 1.0, o.threads);
+  (*scores)["baseline_single_step_loss"] = BaselineLoss(single);
+  for (const int horizon : {4, 10}) {
+    const double sum = RolloutLoss(*model, MakeWindows(fitted, horizon), 1.0, o.threads);
+    (*scores)[horizon == 4 ? "avg_multi_step_loss" : "avg_10_step_loss"] = sum / horizon;
+  }
+}
+
 void RunEvalDelan(const EvalCommandOptions& o) {
   const Delan model = LoadDelan(o.model);
   const JointData data = ReadMeasured(o.data);
@@ -90,7 +119,8 @@ void RunEvalDelan(const EvalCommandOptions& o) {
   // The held-out characters on the DeLaN data; every sample elsewhere.
   const JointData test = data.format == "delan-characters" ? SplitForDelan(data, 0.2, 0).test
                                                           : WithAccelerations(data);
-  const std::map<std::string, double> scores = ScoreDelan(model, test, o.threads);
+  std::map<std::string, double> scores = ScoreDelan(model, test, o.threads);
+  AddDelanRollouts(o, data.format == "delan-characters", &scores);
   for (const auto& [key, value] : scores) {
     if (!std::isfinite(value)) {
       throw NumericalError(StrCat("--model ", o.model, ": ", key, " on ", o.data, " is not finite"));

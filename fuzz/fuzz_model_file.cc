@@ -1,4 +1,4 @@
-// Fuzz target: the model-file loader of every kind (learned, extended-physics),
+// Fuzz target: the model-file loader of every kind (learned, extended-physics, delan),
 // then one batched prediction from the rest state, as every command that loads
 // a model does next.
 #include <cstddef>

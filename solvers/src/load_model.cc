@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/delan.h"
 #include "diffdyn/models/learned_model.h"
 #include "diffdyn/models/model_file.h"
 #include "diffdyn/physics/effects.h"
@@ -31,6 +32,22 @@ std::unique_ptr<TransitionModel> Continuous(std::shared_ptr<const ExtendedModel>
   }
 }
 
+// A DeLaN's forward dynamics through the adapter: x = (q1..qn, qd1..qdn), u = tau1..taun.
+std::unique_ptr<TransitionModel> DelanTransitionModel(Delan delan, const std::string& spec,
+                                                     const LoadModelOptions& options) {
+  DIFFDYN_CHECK(options.dt > 0, "--model ", spec, ": a continuous-time model (delan) needs a "
+                "transition time step (--dt)");
+  SystemDescription system;
+  system.name = "delan";
+  const int n = delan.dof();
+  for (int j = 1; j <= n; ++j) system.state_names.push_back(StrCat("q", j));
+  for (int j = 1; j <= n; ++j) system.state_names.push_back(StrCat("qd", j));
+  for (int j = 1; j <= n; ++j) system.action_names.push_back(StrCat("tau", j));
+  return std::make_unique<ContinuousTransitionModel<DelanDynamics>>(
+      DelanDynamics{std::make_shared<const Delan>(std::move(delan))}, std::move(system), Eigen::VectorXd(),
+      ContinuousOptions{.method = options.method, .dt = options.dt, .substeps = options.substeps}, "delan");
+}
+
 }  // namespace
 
 std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
@@ -54,7 +71,9 @@ std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
   }
   RegisterLearnedModelKinds();
   RegisterExtendedPhysicsKind();
+  RegisterDelanKind();
   const ModelFile file = LoadModelFile(spec);
+  if (file.kind == "delan") return DelanTransitionModel(LoadDelan(spec), spec, options);
   if (file.kind == "extended-physics") {
     auto extended = std::make_shared<const ExtendedModel>(LoadExtendedModel(spec));
     return Continuous(std::move(extended), spec, file.kind, options);
@@ -64,8 +83,8 @@ std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
     return std::make_unique<LearnedModel>(LoadLearnedModel(spec));
   }
   throw Error(StrCat("--model ", spec, ": a model of kind '", file.kind,
-                     "' is not a dynamics model (expected abs-nn, res-nn, abs-node, res-node or "
-                     "extended-physics)"));
+                     "' is not a dynamics model (expected abs-nn, res-nn, abs-node, res-node, "
+                     "extended-physics or delan)"));
 }
 
 }  // namespace diffdyn

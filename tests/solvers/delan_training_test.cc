@@ -1,0 +1,79 @@
+// DeLaN training on joint-space data: the authors' split of the characters, a
+// seeded split elsewhere, training that learns, thread invariance, and scores that
+// agree with the training loss.
+#include "diffdyn/solvers/delan_training.h"
+
+#include <set>
+
+#include <gtest/gtest.h>
+
+namespace diffdyn {
+namespace {
+
+const std::string kCharacters = std::string(DIFFDYN_SHARED_DATA_DIR) + "/delan_characters";
+
+TEST(DelanTraining, CharactersSplitHoldsOutEQV) {
+  const JointData data = ReadMeasured(kCharacters);
+  ASSERT_EQ(data.segment_labels.size(), 20u);
+  EXPECT_EQ(data.segment_labels.front(), "b");
+  const DelanSplit split = SplitForDelan(data, 0.5, 7);  // val_fraction does not apply
+  EXPECT_EQ(split.train.size(), 2459);
+  EXPECT_EQ(split.test.size(), 454);
+  EXPECT_EQ(split.test.qdd.cols(), 454);
+  EXPECT_EQ(split.test.channels.at("g").cols(), 454);
+  // The test samples are exactly those of e, q, v, in file order.
+  std::vector<int> test_index;
+  for (size_t s = 0; s < data.segment_starts.size(); ++s) {
+    const int end = s + 1 < data.segment_starts.size() ? data.segment_starts[s + 1] : data.size();
+    const std::string& l = data.segment_labels[s];
+    if (l == "e" || l == "q" || l == "v")
+      for (int i = data.segment_starts[s]; i < end; ++i) test_index.push_back(i);
+  }
+  ASSERT_EQ(test_index.size(), 454u);
+  for (int i = 0; i < 454; ++i) EXPECT_EQ(split.test.tau.col(i), data.tau.col(test_index[i]));
+}
+
+TEST(DelanTraining, OtherDataGetsASeededSplit) {
+  JointData data = ReadMeasured(kCharacters);
+  data.format = "csv";
+  const DelanSplit a = SplitForDelan(data, 0.25, 3), b = SplitForDelan(data, 0.25, 3),
+                   c = SplitForDelan(data, 0.25, 4);
+  EXPECT_EQ(a.test.size(), 728);  // round(0.25 * 2913)
+  EXPECT_EQ(a.train.size() + a.test.size(), 2913);
+  EXPECT_TRUE(a.test.q == b.test.q);
+  EXPECT_FALSE(a.test.q == c.test.q);
+}
+
+TEST(DelanTraining, LearnsAndIsTheSameAtAnyThreadCount) {
+  const DelanSplit split = SplitForDelan(ReadMeasured(kCharacters), 0.2, 0);
+  TrainOptions options = DelanTrainDefaults();
+  options.epochs = 60;
+  options.progress = false;
+  options.chunk_size = 128;
+  Delan one = Delan::Initialized({.dof = 2, .hidden = 32}, 1), two = one;
+  const std::map<std::string, double> before = ScoreDelan(one, split.test);
+  options.threads = 1;
+  const TrainResult r1 = TrainDelan(&one, split.train, split.test, options);
+  options.threads = 2;
+  const TrainResult r2 = TrainDelan(&two, split.train, split.test, options);
+  EXPECT_TRUE(one.parameters() == two.parameters());
+  EXPECT_EQ(r1.final_val_loss, r2.final_val_loss);
+  const std::map<std::string, double> after = ScoreDelan(one, split.test);
+  EXPECT_LT(after.at("torque_mse"), 0.2 * before.at("torque_mse"));
+  // The score is the training loss's definition on the held-out samples.
+  EXPECT_NEAR(after.at("torque_mse"), r1.final_val_loss, 1e-12 * r1.final_val_loss);
+  EXPECT_GE(after.at("min_mass_eigenvalue"), one.options().epsilon);
+  for (const char* key : {"inertial_mse", "coriolis_mse", "gravity_mse", "power_mse", "torque_nmse"}) {
+    EXPECT_TRUE(after.count(key)) << key;
+  }
+}
+
+TEST(DelanTraining, RefusesDataOfAnotherSize) {
+  const DelanSplit split = SplitForDelan(ReadMeasured(kCharacters), 0.2, 0);
+  Delan model = Delan::Initialized({.dof = 3}, 0);
+  EXPECT_THROW(TrainDelan(&model, split.train, split.test, DelanTrainDefaults()), Error);
+  EXPECT_THROW(ScoreDelan(model, split.test), Error);
+}
+
+}  // namespace
+}  // namespace diffdyn
