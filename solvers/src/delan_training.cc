@@ -106,6 +106,7 @@ TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& va
                   model->dof());
     DIFFDYN_CHECK(d->qdd.cols() == d->size(), d->path, ": DeLaN needs accelerations qdd");
   }
+  DIFFDYN_CHECK(train.has_tau, train.path, ": no measured torques (free motion); DeLaN learns from torques");
   const int n = model->dof();
   const int batch = std::min(options.batch_size, train.size());
   DelanWorkspace ws, val_ws;

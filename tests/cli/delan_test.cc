@@ -1,6 +1,12 @@
 // diffdyn train --model delan and eval of the model file: the authors' split, the
 // component keys, the rollout keys, and one-line errors for data that does not fit.
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -55,6 +61,48 @@ TEST(DelanCli, DataOfAnotherSizeIsOneLineError) {
   EXPECT_EQ(CountLines(r.err), 1) << r.err;
   EXPECT_NE(r.err.find("joints"), std::string::npos) << r.err;
   EXPECT_TRUE(r.out.empty());
+}
+
+// Data that cannot train a DeLaN: one line naming the file, exit 2, nothing written.
+TEST(DelanCli, DataWithoutJointsOrTorquesIsRefused) {
+  const std::string out = TempPath("delan_refused.json");
+  std::filesystem::remove(out);
+  for (const std::string& data : {std::string(DIFFDYN_SHARED_DATA_DIR) + "/pybullet_pushing/collected_data.csv",
+                                 std::string(DIFFDYN_SHARED_DATA_DIR) + "/ibm_double_pendulum"}) {
+    const auto r = RunDiffdyn("train --data " + data + " --model delan --epochs 1 --quiet --out " + out);
+    EXPECT_EQ(r.exit_code, 2) << data;
+    EXPECT_EQ(CountLines(r.err), 1) << r.err;
+    EXPECT_EQ(r.err.rfind("error: ", 0), 0u) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out));
+  }
+}
+
+// Without a qdd column the accelerations are estimated (10 Hz smoothing) and training runs.
+TEST(DelanCli, EstimatesAccelerationsWhenTheDataHasNone) {
+  const std::string with = TempPath("delan_pend_qdd.csv"), without = TempPath("delan_pend_noqdd.csv");
+  Json(RunDiffdyn("collect --system pendulum --trajectories 6 --seconds 5 --seed 5 --quiet --json --out " + with));
+  // Drop the qdd1 column.
+  std::ifstream in(with);
+  std::ofstream out(without);
+  int drop = -1;
+  for (std::string line; std::getline(in, line);) {
+    std::vector<std::string> cells;
+    std::stringstream ss(line);
+    for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
+    if (drop < 0) drop = static_cast<int>(std::find(cells.begin(), cells.end(), "qdd1") - cells.begin());
+    ASSERT_LT(drop, static_cast<int>(cells.size()));
+    for (size_t i = 0, k = 0; i < cells.size(); ++i) {
+      if (static_cast<int>(i) == drop) continue;
+      out << (k++ ? "," : "") << cells[i];
+    }
+    out << '\n';
+  }
+  out.close();
+  const std::string model = TempPath("delan_pend_noqdd.json");
+  const auto t = Json(RunDiffdyn("train --data " + without + " --model delan --epochs 5 --hidden 8 --seed 1 "
+                                 "--quiet --json --out " + model));
+  EXPECT_GT(t.at("n_train").get<int>(), 0);
+  EXPECT_TRUE(std::isfinite(t.at("final_val_loss").get<double>()));
 }
 
 }  // namespace

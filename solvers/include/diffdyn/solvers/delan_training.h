@@ -58,7 +58,8 @@ DelanSplit SplitForDelan(const JointData& data, double val_fraction, std::uint64
 TrainOptions DelanTrainDefaults();
 
 /// Trains *model in place on `train`, validating on `val` (may be empty: no
-/// validation). Throws diffdyn::Error for data of another dof or without qdd.
+/// validation). Throws diffdyn::Error for data of another dof, without qdd, or
+/// without measured torques (free motion: has_tau false).
 TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& val,
                        const TrainOptions& options,
                        const std::function<void(const EpochReport&)>& on_epoch = {});
