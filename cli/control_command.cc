@@ -2,6 +2,10 @@
 //
 //   diffdyn control --system pendulum --controller mppi [--model M] --starts 20 --seed 1
 //                   [--samples 1000] [--horizon 1.0] [--dt 0.04] [--out DIR] [--json]
+//   diffdyn control --system pendulum --controller lqr --starts 300 --seed 1
+//
+// `lqr` is the regulator of the task's own analytic model linearised at the goal
+// (solvers/lqr.h), clipped to the bounds by the evaluator; it takes no --model.
 //
 // The task (physics/control_task.h) gives the plant, the cost, the success test and
 // the start distribution; the evaluator (solvers/control.h) runs the controller on
@@ -28,6 +32,7 @@
 #include "diffdyn/autodiff_ode/progress.h"
 #include "diffdyn/physics/control_task.h"
 #include "diffdyn/solvers/control.h"
+#include "diffdyn/solvers/lqr.h"
 #include "diffdyn/solvers/load_model.h"
 #include "diffdyn/solvers/pushing_trials.h"
 
@@ -99,8 +104,27 @@ void RunControl(const ControlCommandOptions& o) {
   // Validate everything before anything is written.
   const ControlTask task = ControlTaskByName(o.system);
   DIFFDYN_CHECK(o.starts >= 1 && o.starts <= 100000, "--starts must be in [1, 100000], got ", o.starts);
-  const std::unique_ptr<TransitionModel> model = PlanningModel(o, task);
-  MppiController controller(task, *model, o.mppi);
+  std::unique_ptr<TransitionModel> model;
+  std::unique_ptr<Controller> owned;
+  std::string extra;  // what the text summary adds about the controller
+  double riccati_residual = -1.0;
+  if (o.controller == "lqr") {
+    DIFFDYN_CHECK(o.model.empty() || o.model == o.system, "--model ", o.model.substr(0, 80),
+                  ": lqr linearises the task's own analytic model (omit --model)");
+    model = TaskModel(task, task.period, 1);
+    auto lqr = std::make_unique<LqrController>(task, TaskLqr(task));
+    riccati_residual = lqr->solution().riccati_residual;
+    std::string gains;
+    for (Eigen::Index i = 0; i < lqr->solution().K.size(); ++i) {
+      gains += fmt::format("{}{:.4g}", i ? ", " : "", lqr->solution().K.data()[i]);
+    }
+    extra = fmt::format("; K = [{}] (column-major), Riccati residual {:.1e}", gains, riccati_residual);
+    owned = std::move(lqr);
+  } else {
+    model = PlanningModel(o, task);
+    owned = std::make_unique<MppiController>(task, *model, o.mppi);
+  }
+  Controller& controller = *owned;
   if (!o.out.empty()) {
     std::error_code ec;
     fs::create_directories(fs::path(o.out) / "trajectories", ec);
@@ -133,7 +157,7 @@ void RunControl(const ControlCommandOptions& o) {
   const double rate = static_cast<double>(successes) / o.starts;
   const double ms = Percentile(command_ms, 0.5);
   if (o.common.json) {
-    PrintJson({{"system", o.system},           {"controller", o.controller},
+    nlohmann::json summary({{"system", o.system},           {"controller", o.controller},
                {"starts", o.starts},           {"successes", successes},
                {"success_rate", rate},         {"ci95_low", low},
                {"ci95_high", high},            {"mean_cost", cost_sum / o.starts},
@@ -141,14 +165,17 @@ void RunControl(const ControlCommandOptions& o) {
                {"max_abs_u", max_abs_u},       {"ms_per_command", ms},
                {"model", o.model.empty() ? o.system : o.model}, {"model_kind", model->kind()},
                {"hold", controller.hold()},    {"seed", o.common.seed}});
+    if (riccati_residual >= 0) summary["riccati_residual"] = riccati_residual;
+    PrintJson(summary);
     return;
   }
   fmt::print("{} on the {} task with {} ({}), {} starts: success {}/{} = {:.0f} % (95 % interval {:.0f}-{:.0f} %)\n",
              o.controller, o.system, o.model.empty() ? o.system : o.model, model->kind(), o.starts, successes,
              o.starts, 100 * rate, 100 * low, 100 * high);
   fmt::print("cost mean {:.2f}, median {:.2f}, 90th percentile {:.2f}; max |u| {:.3f}; {:.2f} ms per command "
-             "(median), action held {} period(s)\n",
-             cost_sum / o.starts, Percentile(costs, 0.5), Percentile(costs, 0.9), max_abs_u, ms, controller.hold());
+             "(median), action held {} period(s){}\n",
+             cost_sum / o.starts, Percentile(costs, 0.5), Percentile(costs, 0.9), max_abs_u, ms, controller.hold(),
+             extra);
 }
 
 }  // namespace
@@ -159,8 +186,9 @@ void RegisterControlCommand(CLI::App& app) {
   AddCommonOptions(command, o->common);
   command->add_option("--system", o->system, "Control task: pendulum (swing-up) or cartpole (swing-up)")
       ->capture_default_str();
-  command->add_option("--controller", o->controller, "Controller: mppi")
-      ->check(CLI::IsMember({"mppi"}))
+  command->add_option("--controller", o->controller,
+                      "Controller: mppi (over --model) or lqr (the task's model linearised at the goal, clipped)")
+      ->check(CLI::IsMember({"mppi", "lqr"}))
       ->capture_default_str();
   command->add_option("--model", o->model,
                       "Model to plan with: a model file, or the task's system name (default: the task's analytic model)");

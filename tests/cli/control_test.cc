@@ -62,7 +62,7 @@ TEST(Control, BadOptionsAreOneLineErrorsAndWriteNothing) {
            {"--samples 0", "--samples"},
            {"--horizon 0", "--horizon"},
            {"--lambda nan", "--lambda"},
-           {"--controller lqr", "--controller"},
+           {"--controller pid", "--controller"},
            {"--model cartpole", "--model"},
            {"--model /no/such/model.json", "--model"}}) {
     std::filesystem::remove_all(out);
@@ -73,6 +73,21 @@ TEST(Control, BadOptionsAreOneLineErrorsAndWriteNothing) {
     EXPECT_NE(r.err.find(fragment), std::string::npos) << args << ": " << r.err;
     EXPECT_FALSE(std::filesystem::exists(out)) << args;
   }
+}
+
+// The clipped LQR: the contract's keys plus the Riccati residual; it takes no --model.
+TEST(Control, LqrReportsItsRiccatiResidualAndRefusesAModel) {
+  const auto r = RunDiffdyn("control --system pendulum --controller lqr --starts 3 --seed 2 --quiet --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["controller"].get<std::string>(), "lqr");
+  EXPECT_EQ(j["starts"].get<int>(), 3);
+  EXPECT_LT(j["riccati_residual"].get<double>(), 1e-9);
+  EXPECT_LE(j["max_abs_u"].get<double>(), 2.5);
+  const auto bad = RunDiffdyn("control --system pendulum --controller lqr --model cartpole --starts 3 --quiet");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_EQ(CountLines(bad.err), 1) << bad.err;
+  EXPECT_NE(bad.err.find("--model"), std::string::npos) << bad.err;
 }
 
 }  // namespace

@@ -48,6 +48,7 @@
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/parallel.h"
+#include "diffdyn/autodiff_ode/spd_solve.h"
 #include "diffdyn/models/activations.h"
 #include "diffdyn/models/init.h"
 #include "diffdyn/models/json_io.h"
@@ -285,7 +286,7 @@ class Delan {
     using Vec = Eigen::Matrix<S, Eigen::Dynamic, 1>;
     DelanHead<S> head = Head(q, qd, Vec::Zero(dof()).eval());
     const Vec rhs = tau - head.coriolis() - head.gravity();
-    return head.MassMatrix().llt().solve(rhs);
+    return SpdSolve<S>(head.MassMatrix(), rhs);
   }
 
   /// The full per-sample head (L, H, c, g, energies) of one sample.

@@ -40,6 +40,7 @@
 #include <Eigen/LU>
 #include <ceres/jet.h>
 
+#include "diffdyn/autodiff_ode/spd_solve.h"
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/jacobian.h"  // VectorX<T>
 #include "diffdyn/models/continuous_model.h"
@@ -97,6 +98,14 @@ class AnalyticModel {
   virtual VectorX<DiagJet> TipLoad(const VectorX<DiagJet>& q, const VectorX<DiagJet>& qd,
                                    const VectorX<DiagJet>& qdd,
                                    const VectorX<DiagJet>& p) const = 0;
+
+  /// The Jacobians A = df/dx (2n x 2n) and B = df/du (2n x a) at (x, u) of the
+  /// continuous dynamics dx/dt = f(x, u) of AnalyticDynamics (below) with parameters
+  /// p, the `actuated` joints (0-based; empty: all, a = n) and viscous `damping` (n
+  /// entries or empty), by forward-mode Jets (kDiagJetSize inputs per pass).
+  virtual void Linearize(const Eigen::VectorXd& p, const std::vector<int>& actuated,
+                         const Eigen::VectorXd& damping, const Eigen::VectorXd& x,
+                         const Eigen::VectorXd& u, Eigen::MatrixXd* a, Eigen::MatrixXd* b) const = 0;
 
   /// The model as a transition model of x = (q, qd) over options.dt
   /// (continuous_model.h): AnalyticDynamics (below) with parameters p, the `actuated`
@@ -188,6 +197,10 @@ class AnalyticModelAdapter final : public AnalyticModel {
     return Model::template TipLoad<DiagJet>(q, qd, qdd, p);
   }
 
+  void Linearize(const Eigen::VectorXd& p, const std::vector<int>& actuated, const Eigen::VectorXd& damping,
+                 const Eigen::VectorXd& x, const Eigen::VectorXd& u, Eigen::MatrixXd* a,
+                 Eigen::MatrixXd* b) const override;
+
   std::unique_ptr<TransitionModel> MakeTransitionModel(const Eigen::VectorXd& p,
                                                        std::vector<int> actuated,
                                                        Eigen::VectorXd damping,
@@ -236,9 +249,38 @@ struct AnalyticDynamics {
     for (Eigen::Index j = 0; j < damping.size(); ++j) force[j] -= damping[j] * qd[j];
     dxdt.resize(2 * n);
     dxdt.head(n) = qd;
-    dxdt.tail(n) = mass.llt().solve(force);
+    dxdt.tail(n) = SpdSolve(mass, force);  // mass.llt() would drop Jets whose value is 0
   }
 };
+
+template <typename Model>
+void AnalyticModelAdapter<Model>::Linearize(const Eigen::VectorXd& p, const std::vector<int>& actuated,
+                                            const Eigen::VectorXd& damping, const Eigen::VectorXd& x,
+                                            const Eigen::VectorXd& u, Eigen::MatrixXd* a,
+                                            Eigen::MatrixXd* b) const {
+  const int n = Model::kDof, nx = 2 * n;
+  const int na = actuated.empty() ? n : static_cast<int>(actuated.size());
+  DIFFDYN_CHECK(x.size() == nx && u.size() == na && p.size() == static_cast<Eigen::Index>(specs_.size()),
+                Model::kName, ": Linearize expects x of ", nx, ", u of ", na, " and ", specs_.size(),
+                " parameters, got ", x.size(), ", ", u.size(), " and ", p.size());
+  const AnalyticDynamics<Model> f{actuated, damping};
+  const VectorX<DiagJet> theta = p.cast<DiagJet>();
+  a->resize(nx, nx);
+  b->resize(nx, na);
+  // Inputs z = (x, u), kDiagJetSize of them seeded per pass.
+  for (int first = 0; first < nx + na; first += kDiagJetSize) {
+    VectorX<DiagJet> xj = x.cast<DiagJet>(), uj = u.cast<DiagJet>(), dxdt;
+    for (int k = 0; k < kDiagJetSize && first + k < nx + na; ++k) {
+      const int i = first + k;
+      (i < nx ? xj[i] : uj[i - nx]).v[k] = 1.0;
+    }
+    f(xj, uj, theta, 0.0, dxdt);
+    for (int k = 0; k < kDiagJetSize && first + k < nx + na; ++k) {
+      const int i = first + k;
+      for (int r = 0; r < nx; ++r) (i < nx ? (*a)(r, i) : (*b)(r, i - nx)) = dxdt[r].v[k];
+    }
+  }
+}
 
 template <typename Model>
 std::unique_ptr<TransitionModel> AnalyticModelAdapter<Model>::MakeTransitionModel(

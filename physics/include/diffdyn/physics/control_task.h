@@ -176,6 +176,27 @@ inline ControlTask ControlTaskByName(const std::string& name) {
   return t;
 }
 
+/// The plant's viscous joint friction (n coefficients, AnalyticDynamics' damping);
+/// throws diffdyn::Error for any other effect.
+inline Eigen::VectorXd TaskDamping(const ControlTask& task) {
+  const JointTask& plant = task.plant;
+  const int n = task.state_size() / 2;
+  Eigen::VectorXd damping = Eigen::VectorXd::Zero(n);
+  for (const Effect& e : plant.effects) {
+    DIFFDYN_CHECK(e.kind == EffectKind::kViscous && e.joint >= 1 && e.joint <= n, plant.name,
+                  ": a task plant takes viscous joint friction only");
+    damping[e.joint - 1] += e.params[0];
+  }
+  return damping;
+}
+
+/// The actuated joints, 0-based (AnalyticDynamics' actuated).
+inline std::vector<int> TaskActuatedJoints(const ControlTask& task) {
+  std::vector<int> actuated;
+  for (int j : task.plant.actuated) actuated.push_back(j - 1);
+  return actuated;
+}
+
 /// The task's plant as a transition model over `dt` seconds (rk4-classic, `substeps`
 /// steps): x = (q, qd) (n), u = the actuated torques (m), the model's parameters and
 /// the task's viscous friction (AnalyticModel::MakeTransitionModel). Throws
@@ -183,16 +204,8 @@ inline ControlTask ControlTaskByName(const std::string& name) {
 inline std::unique_ptr<TransitionModel> TaskModel(const ControlTask& task, double dt, int substeps) {
   const JointTask& plant = task.plant;
   const auto model = plant.Model();
-  Eigen::VectorXd damping = Eigen::VectorXd::Zero(model->dof());
-  for (const Effect& e : plant.effects) {
-    DIFFDYN_CHECK(e.kind == EffectKind::kViscous && e.joint >= 1 && e.joint <= model->dof(), plant.name,
-                  ": a task plant takes viscous joint friction only");
-    damping[e.joint - 1] += e.params[0];
-  }
-  std::vector<int> actuated;
-  for (int j : plant.actuated) actuated.push_back(j - 1);
-  return model->MakeTransitionModel(ParseParams(*model, plant.params), std::move(actuated), std::move(damping),
-                                    plant.System(),
+  return model->MakeTransitionModel(ParseParams(*model, plant.params), TaskActuatedJoints(task),
+                                    TaskDamping(task), plant.System(),
                                     {.method = Method::kRk4Classic, .dt = dt, .substeps = substeps});
 }
 
