@@ -46,6 +46,28 @@ struct TrainCommandOptions {
   std::string out = "model.json";
 };
 
+// The losses and timing a model file records of its training.
+nlohmann::json TrainMetrics(const TrainResult& r) {
+  return {{"final_train_loss", r.final_train_loss},
+          {"final_val_loss", r.final_val_loss},
+          {"seconds_per_epoch", r.seconds_per_epoch}};
+}
+
+// The --json keys every train run prints; callers add their model's own.
+nlohmann::json TrainSummary(const TrainCommandOptions& o, const TrainResult& r, const std::string& system,
+                            Eigen::Index parameters) {
+  nlohmann::json j = TrainMetrics(r);
+  j.update({{"model_path", o.out},
+            {"n_train", r.n_train},
+            {"n_val", r.n_val},
+            {"epochs", static_cast<int>(r.epochs.size())},
+            {"stopped_early", r.stopped_early},
+            {"system", system},
+            {"model", o.model},
+            {"parameters", parameters}});
+  return j;
+}
+
 // The DeLaN authors' value of an option the user did not give.
 template <typename T>
 T OrDefault(const CLI::App& command, const char* name, T given, T fallback) {
@@ -79,23 +101,11 @@ void RunTrainDelan(const TrainCommandOptions& o, const CLI::App& command) {
       {"epochs", options.epochs},   {"lr", options.learning_rate}, {"batch", options.batch_size},
       {"weight_decay", options.weight_decay}, {"amsgrad", options.amsgrad}, {"split", split.how},
       {"n_train", result.n_train},  {"n_val", result.n_val}, {"epochs_run", result.epochs.size()}};
-  const nlohmann::json metrics = {{"final_train_loss", result.final_train_loss},
-                                  {"final_val_loss", result.final_val_loss},
-                                  {"seconds_per_epoch", result.seconds_per_epoch}};
-  SaveDelan(o.out, model, provenance, metrics);
+  SaveDelan(o.out, model, provenance, TrainMetrics(result));
   if (o.common.json) {
-    PrintJson({{"model_path", o.out},
-               {"n_train", result.n_train},
-               {"n_val", result.n_val},
-               {"epochs", static_cast<int>(result.epochs.size())},
-               {"stopped_early", result.stopped_early},
-               {"system", data.format},
-               {"seconds_per_epoch", result.seconds_per_epoch},
-               {"final_train_loss", result.final_train_loss},
-               {"final_val_loss", result.final_val_loss},
-               {"model", o.model},
-               {"loss", "torque"},
-               {"parameters", model.num_parameters()}});
+    nlohmann::json summary = TrainSummary(o, result, data.format, model.num_parameters());
+    summary["loss"] = "torque";
+    PrintJson(summary);
   } else {
     fmt::print("delan ({} parameters, {} joints) trained on {} samples, validated on {} ({})\n",
                model.num_parameters(), model.dof(), result.n_train, result.n_val, split.how);
@@ -158,27 +168,12 @@ void RunTrain(const TrainCommandOptions& o, const CLI::App& command) {
       {"n_train", result.n_train},  {"n_val", result.n_val},    {"dt", dt.median},
       {"dt_min", dt.min},           {"dt_max", dt.max},        {"epochs_run", result.epochs.size()},
       {"normalized", normalize}};
-  const nlohmann::json metrics = {{"final_train_loss", result.final_train_loss},
-                                  {"final_val_loss", result.final_val_loss},
-                                  {"seconds_per_epoch", result.seconds_per_epoch}};
-  SaveLearnedModel(o.out, model, provenance, metrics);
+  SaveLearnedModel(o.out, model, provenance, TrainMetrics(result));
 
   if (o.common.json) {
-    PrintJson({{"model_path", o.out},
-               {"n_train", result.n_train},
-               {"n_val", result.n_val},
-               {"epochs", static_cast<int>(result.epochs.size())},
-               {"stopped_early", result.stopped_early},
-               {"system", dataset.system.name},
-               {"dt", dt.median},
-               {"dt_jitter", dt.jitter()},
-               {"normalized", normalize},
-               {"seconds_per_epoch", result.seconds_per_epoch},
-               {"final_train_loss", result.final_train_loss},
-               {"final_val_loss", result.final_val_loss},
-               {"model", o.model},
-               {"loss", o.loss},
-               {"parameters", model.num_parameters()}});
+    nlohmann::json summary = TrainSummary(o, result, dataset.system.name, model.num_parameters());
+    summary.update({{"dt", dt.median}, {"dt_jitter", dt.jitter()}, {"normalized", normalize}, {"loss", o.loss}});
+    PrintJson(summary);
   } else {
     fmt::print("{} ({} parameters, {} states, {} actions) trained on {} {}-step samples of {}, "
                "validated on {}\n",
