@@ -3,9 +3,14 @@
 //   diffdyn control --system pendulum --controller mppi [--model M] --starts 20 --seed 1
 //                   [--samples 1000] [--horizon 1.0] [--dt 0.04] [--out DIR] [--json]
 //   diffdyn control --system pendulum --controller lqr --starts 300 --seed 1
+//   diffdyn control --system pendulum --controller shooting --starts 300 --seed 1 [--iterations 50]
 //
 // `lqr` is the regulator of the task's own analytic model linearised at the goal
-// (solvers/lqr.h), clipped to the bounds by the evaluator; it takes no --model.
+// (solvers/lqr.h), clipped to the bounds by the evaluator. `shooting` solves the
+// task's optimal-control problem from each start by multiple shooting on the task's
+// own analytic model (solvers/multiple_shooting.h) and replays the actions open loop.
+// Neither takes --model. Controllers that can be copied (lqr, shooting) run their
+// starts on --threads threads.
 //
 // The task (physics/control_task.h) gives the plant, the cost, the success test and
 // the start distribution; the evaluator (solvers/control.h) runs the controller on
@@ -33,6 +38,7 @@
 #include "diffdyn/physics/control_task.h"
 #include "diffdyn/solvers/control.h"
 #include "diffdyn/solvers/lqr.h"
+#include "diffdyn/solvers/multiple_shooting.h"
 #include "diffdyn/solvers/load_model.h"
 #include "diffdyn/solvers/pushing_trials.h"
 
@@ -49,6 +55,7 @@ struct ControlCommandOptions {
   int starts = 20;
   double dt = 0.04;
   MppiControlOptions mppi;
+  MultipleShootingOptions shooting;
   std::string out;
 };
 
@@ -108,10 +115,17 @@ void RunControl(const ControlCommandOptions& o) {
   std::unique_ptr<Controller> owned;
   std::string extra;  // what the text summary adds about the controller
   double riccati_residual = -1.0;
-  if (o.controller == "lqr") {
-    DIFFDYN_CHECK(o.model.empty() || o.model == o.system, "--model ", o.model.substr(0, 80),
-                  ": lqr linearises the task's own analytic model (omit --model)");
+  const MultipleShootingController* shooting = nullptr;
+  if (o.controller == "lqr" || o.controller == "shooting") {
+    DIFFDYN_CHECK(o.model.empty() || o.model == o.system, "--model ", o.model.substr(0, 80), ": ", o.controller,
+                  " uses the task's own analytic model (omit --model)");
     model = TaskModel(task, task.period, 1);
+  }
+  if (o.controller == "shooting") {
+    auto owned_shooting = std::make_unique<MultipleShootingController>(task, o.shooting);
+    shooting = owned_shooting.get();
+    owned = std::move(owned_shooting);
+  } else if (o.controller == "lqr") {
     auto lqr = std::make_unique<LqrController>(task, TaskLqr(task));
     riccati_residual = lqr->solution().riccati_residual;
     std::string gains;
@@ -133,13 +147,15 @@ void RunControl(const ControlCommandOptions& o) {
 
   ProgressBar bar("control", o.starts, !o.common.quiet);
   const std::vector<ControlRun> runs = EvaluateController(
-      task, controller, {.starts = o.starts, .seed = o.common.seed, .progress = [&](int done) { bar.Update(done); }});
+      task, controller,
+      {.starts = o.starts, .seed = o.common.seed, .threads = o.mppi.threads, .progress = [&](int done) { bar.Update(done); }});
   bar.Finish();
 
   int successes = 0;
-  double max_abs_u = 0.0, cost_sum = 0.0;
+  double max_abs_u = 0.0, cost_sum = 0.0, seconds_sum = 0.0;
   std::vector<double> costs, command_ms;
   for (const ControlRun& r : runs) {
+    seconds_sum += r.seconds;
     successes += r.success ? 1 : 0;
     max_abs_u = std::max(max_abs_u, r.max_abs_u);
     cost_sum += r.cost;
@@ -166,8 +182,21 @@ void RunControl(const ControlCommandOptions& o) {
                {"model", o.model.empty() ? o.system : o.model}, {"model_kind", model->kind()},
                {"hold", controller.hold()},    {"seed", o.common.seed}});
     if (riccati_residual >= 0) summary["riccati_residual"] = riccati_residual;
+    if (shooting) {
+      const ShootingTotals t = shooting->totals();
+      summary["seconds_per_start"] = seconds_sum / o.starts;
+      summary["max_shooting_defect"] = t.largest_shooting_defect;
+      summary["max_defect"] = t.largest_defect;
+      summary["iterations"] = t.iterations;
+    }
     PrintJson(summary);
     return;
+  }
+  if (shooting) {
+    const ShootingTotals t = shooting->totals();
+    extra = fmt::format("; {:.2f} s per start (mean), largest continuity defect {:.1e} after the polish "
+                        "({:.1e} before), {} iterations",
+                        seconds_sum / o.starts, t.largest_defect, t.largest_shooting_defect, t.iterations);
   }
   fmt::print("{} on the {} task with {} ({}), {} starts: success {}/{} = {:.0f} % (95 % interval {:.0f}-{:.0f} %)\n",
              o.controller, o.system, o.model.empty() ? o.system : o.model, model->kind(), o.starts, successes,
@@ -187,8 +216,9 @@ void RegisterControlCommand(CLI::App& app) {
   command->add_option("--system", o->system, "Control task: pendulum (swing-up) or cartpole (swing-up)")
       ->capture_default_str();
   command->add_option("--controller", o->controller,
-                      "Controller: mppi (over --model) or lqr (the task's model linearised at the goal, clipped)")
-      ->check(CLI::IsMember({"mppi", "lqr"}))
+                      "Controller: mppi (over --model), lqr (the task's model linearised at the goal, clipped) "
+                      "or shooting (multiple shooting per start, replayed open loop)")
+      ->check(CLI::IsMember({"mppi", "lqr", "shooting"}))
       ->capture_default_str();
   command->add_option("--model", o->model,
                       "Model to plan with: a model file, or the task's system name (default: the task's analytic model)");
@@ -209,6 +239,10 @@ void RegisterControlCommand(CLI::App& app) {
   command->add_option("--terminal", o->mppi.terminal_seconds,
                       "MPPI terminal cost: the state cost at the horizon's end held for this long (s)")
       ->check(Bounded(0, 1e3))
+      ->capture_default_str();
+  command->add_option("--iterations", o->shooting.max_iterations,
+                      "shooting: Levenberg-Marquardt iterations per continuity weight and per polish")
+      ->check(Bounded(1, 100000))
       ->capture_default_str();
   command->add_option("--threads", o->mppi.threads, "Threads, >= 0 (0: all cores; results do not depend on it)")
       ->check(Bounded(0, 256))

@@ -2,9 +2,11 @@
 
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <string>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/parallel.h"
 #include "diffdyn/autodiff_ode/random.h"
 
 namespace diffdyn {
@@ -76,14 +78,26 @@ int PeriodsPerStep(double dt, double period, const std::string& what) {
 std::vector<ControlRun> EvaluateController(const ControlTask& task, Controller& controller,
                                            const EvaluationOptions& options) {
   DIFFDYN_CHECK(options.starts >= 1, "--starts must be >= 1, got ", options.starts);
-  const auto plant = TaskModel(task, task.period, 4);
-  std::vector<ControlRun> runs;
   const std::vector<Eigen::VectorXd> starts = DrawStarts(task, options.starts, options.seed);
-  for (int s = 0; s < options.starts; ++s) {
-    runs.push_back(RunFrom(task, *plant, controller, starts[static_cast<std::size_t>(s)],
-                           SplitMix64Hash(SplitMix64Hash(options.seed) ^ static_cast<std::uint64_t>(s))));
-    if (options.progress) options.progress(s + 1);
-  }
+  std::vector<ControlRun> runs(static_cast<std::size_t>(options.starts));
+  auto seed_of = [&](int s) {
+    return SplitMix64Hash(SplitMix64Hash(options.seed) ^ static_cast<std::uint64_t>(s));
+  };
+  // One chunk per start; a clone of the controller and a plant per chunk when the
+  // controller can be cloned, else the caller's controller on one thread.
+  const bool parallel = ResolveThreads(options.threads) > 1 && options.starts > 1 && controller.Clone() != nullptr;
+  std::mutex progress_mutex;
+  int finished = 0;
+  ParallelForChunks(options.starts, 1, parallel ? options.threads : 1, [&](int, int s, int) {
+    const auto plant = TaskModel(task, task.period, 4);
+    std::unique_ptr<Controller> clone = parallel ? controller.Clone() : nullptr;
+    const auto i = static_cast<std::size_t>(s);
+    runs[i] = RunFrom(task, *plant, clone ? *clone : controller, starts[i], seed_of(s));
+    if (options.progress) {
+      const std::lock_guard<std::mutex> lock(progress_mutex);
+      options.progress(++finished);
+    }
+  });
   return runs;
 }
 

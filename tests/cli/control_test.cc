@@ -90,5 +90,26 @@ TEST(Control, LqrReportsItsRiccatiResidualAndRefusesAModel) {
   EXPECT_NE(bad.err.find("--model"), std::string::npos) << bad.err;
 }
 
+// One start with few iterations: the keys, the bound and the refusals (the 300-start
+// acceptance run is in README.md).
+TEST(Control, ShootingReportsDefectsAndRefusesBadOptions) {
+  const auto r = RunDiffdyn(
+      "control --system pendulum --controller shooting --starts 1 --seed 2 --iterations 5 --quiet --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["controller"].get<std::string>(), "shooting");
+  EXPECT_LE(j["max_abs_u"].get<double>(), 2.5);
+  EXPECT_LT(j["max_defect"].get<double>(), 1e-9);
+  EXPECT_GE(j["max_shooting_defect"].get<double>(), 0.0);
+  EXPECT_GT(j["iterations"].get<int>(), 0);
+  EXPECT_GT(j["seconds_per_start"].get<double>(), 0.0);
+  for (const char* bad_options : {"--model cartpole", "--iterations 0", "--iterations x"}) {
+    const auto bad = RunDiffdyn(std::string("control --system pendulum --controller shooting --starts 1 --quiet ") +
+                                bad_options);
+    EXPECT_EQ(bad.exit_code, 2) << bad_options;
+    EXPECT_EQ(CountLines(bad.err), 1) << bad.err;
+  }
+}
+
 }  // namespace
 }  // namespace diffdyn

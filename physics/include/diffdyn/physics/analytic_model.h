@@ -99,13 +99,36 @@ class AnalyticModel {
                                    const VectorX<DiagJet>& qdd,
                                    const VectorX<DiagJet>& p) const = 0;
 
-  /// The Jacobians A = df/dx (2n x 2n) and B = df/du (2n x a) at (x, u) of the
-  /// continuous dynamics dx/dt = f(x, u) of AnalyticDynamics (below) with parameters
-  /// p, the `actuated` joints (0-based; empty: all, a = n) and viscous `damping` (n
-  /// entries or empty), by forward-mode Jets (kDiagJetSize inputs per pass).
-  virtual void Linearize(const Eigen::VectorXd& p, const std::vector<int>& actuated,
-                         const Eigen::VectorXd& damping, const Eigen::VectorXd& x,
-                         const Eigen::VectorXd& u, Eigen::MatrixXd* a, Eigen::MatrixXd* b) const = 0;
+  /// dx/dt = f(x, u) of AnalyticDynamics (below) on Jets (derivatives w.r.t. whatever
+  /// the caller seeded in x and u): parameters p, the `actuated` joints (0-based; empty:
+  /// all, a = n), viscous `damping` (n entries or empty); x (2n), u (a). Throws
+  /// diffdyn::Error for bad sizes.
+  virtual VectorX<DiagJet> Dynamics(const Eigen::VectorXd& p, const std::vector<int>& actuated,
+                                    const Eigen::VectorXd& damping, const VectorX<DiagJet>& x,
+                                    const VectorX<DiagJet>& u) const = 0;
+
+  /// The Jacobians A = df/dx (2n x 2n) and B = df/du (2n x a) of Dynamics at (x, u),
+  /// by forward-mode Jets (kDiagJetSize inputs per pass).
+  void Linearize(const Eigen::VectorXd& p, const std::vector<int>& actuated, const Eigen::VectorXd& damping,
+                 const Eigen::VectorXd& x, const Eigen::VectorXd& u, Eigen::MatrixXd* a,
+                 Eigen::MatrixXd* b) const {
+    const int nx = static_cast<int>(x.size()), na = static_cast<int>(u.size());
+    a->resize(nx, nx);
+    b->resize(nx, na);
+    // Inputs z = (x, u), kDiagJetSize of them seeded per pass.
+    for (int first = 0; first < nx + na; first += kDiagJetSize) {
+      VectorX<DiagJet> xj = x.cast<DiagJet>(), uj = u.cast<DiagJet>();
+      for (int k = 0; k < kDiagJetSize && first + k < nx + na; ++k) {
+        const int i = first + k;
+        (i < nx ? xj[i] : uj[i - nx]).v[k] = 1.0;
+      }
+      const VectorX<DiagJet> dxdt = Dynamics(p, actuated, damping, xj, uj);
+      for (int k = 0; k < kDiagJetSize && first + k < nx + na; ++k) {
+        const int i = first + k;
+        for (int r = 0; r < nx; ++r) (i < nx ? (*a)(r, i) : (*b)(r, i - nx)) = dxdt[r].v[k];
+      }
+    }
+  }
 
   /// The model as a transition model of x = (q, qd) over options.dt
   /// (continuous_model.h): AnalyticDynamics (below) with parameters p, the `actuated`
@@ -197,9 +220,9 @@ class AnalyticModelAdapter final : public AnalyticModel {
     return Model::template TipLoad<DiagJet>(q, qd, qdd, p);
   }
 
-  void Linearize(const Eigen::VectorXd& p, const std::vector<int>& actuated, const Eigen::VectorXd& damping,
-                 const Eigen::VectorXd& x, const Eigen::VectorXd& u, Eigen::MatrixXd* a,
-                 Eigen::MatrixXd* b) const override;
+  VectorX<DiagJet> Dynamics(const Eigen::VectorXd& p, const std::vector<int>& actuated,
+                            const Eigen::VectorXd& damping, const VectorX<DiagJet>& x,
+                            const VectorX<DiagJet>& u) const override;
 
   std::unique_ptr<TransitionModel> MakeTransitionModel(const Eigen::VectorXd& p,
                                                        std::vector<int> actuated,
@@ -254,32 +277,19 @@ struct AnalyticDynamics {
 };
 
 template <typename Model>
-void AnalyticModelAdapter<Model>::Linearize(const Eigen::VectorXd& p, const std::vector<int>& actuated,
-                                            const Eigen::VectorXd& damping, const Eigen::VectorXd& x,
-                                            const Eigen::VectorXd& u, Eigen::MatrixXd* a,
-                                            Eigen::MatrixXd* b) const {
-  const int n = Model::kDof, nx = 2 * n;
+VectorX<DiagJet> AnalyticModelAdapter<Model>::Dynamics(const Eigen::VectorXd& p, const std::vector<int>& actuated,
+                                                       const Eigen::VectorXd& damping, const VectorX<DiagJet>& x,
+                                                       const VectorX<DiagJet>& u) const {
+  const int n = Model::kDof;
   const int na = actuated.empty() ? n : static_cast<int>(actuated.size());
-  DIFFDYN_CHECK(x.size() == nx && u.size() == na && p.size() == static_cast<Eigen::Index>(specs_.size()),
-                Model::kName, ": Linearize expects x of ", nx, ", u of ", na, " and ", specs_.size(),
-                " parameters, got ", x.size(), ", ", u.size(), " and ", p.size());
-  const AnalyticDynamics<Model> f{actuated, damping};
-  const VectorX<DiagJet> theta = p.cast<DiagJet>();
-  a->resize(nx, nx);
-  b->resize(nx, na);
-  // Inputs z = (x, u), kDiagJetSize of them seeded per pass.
-  for (int first = 0; first < nx + na; first += kDiagJetSize) {
-    VectorX<DiagJet> xj = x.cast<DiagJet>(), uj = u.cast<DiagJet>(), dxdt;
-    for (int k = 0; k < kDiagJetSize && first + k < nx + na; ++k) {
-      const int i = first + k;
-      (i < nx ? xj[i] : uj[i - nx]).v[k] = 1.0;
-    }
-    f(xj, uj, theta, 0.0, dxdt);
-    for (int k = 0; k < kDiagJetSize && first + k < nx + na; ++k) {
-      const int i = first + k;
-      for (int r = 0; r < nx; ++r) (i < nx ? (*a)(r, i) : (*b)(r, i - nx)) = dxdt[r].v[k];
-    }
-  }
+  DIFFDYN_CHECK(x.size() == 2 * n && u.size() == na && p.size() == static_cast<Eigen::Index>(specs_.size()) &&
+                    (damping.size() == 0 || damping.size() == n),
+                Model::kName, ": Dynamics expects x of ", 2 * n, ", u of ", na, ", ", specs_.size(),
+                " parameters and ", n, " damping coefficients, got ", x.size(), ", ", u.size(), ", ", p.size(),
+                " and ", damping.size());
+  VectorX<DiagJet> dxdt;
+  AnalyticDynamics<Model>{actuated, damping}(x, u, p.cast<DiagJet>().eval(), 0.0, dxdt);
+  return dxdt;
 }
 
 template <typename Model>

@@ -9,6 +9,9 @@
 //   success = task.Succeeded(x_K) and no state limit broken on the way,
 //   max |u| over the run, wall time, and the milliseconds of every Command call.
 //
+// Starts run on `threads` threads when the controller can be cloned (Clone); the runs
+// do not depend on the thread count.
+//
 // A controller may hold its action for hold() periods (it then plans on a grid of
 // hold() * period seconds): Command is called every hold() periods, the action is
 // clipped to the task's bounds and held (zero-order hold).
@@ -50,6 +53,9 @@ class Controller {
   virtual void Reset(const Eigen::VectorXd& x0, std::uint64_t seed) = 0;
   /// The action (m) at state x (n); the evaluator clips it to the task's bounds.
   virtual Eigen::VectorXd Command(const Eigen::VectorXd& x) = 0;
+  /// A fresh copy for another thread, or null when the controller cannot be copied
+  /// (the evaluator then runs its starts one after another).
+  virtual std::unique_ptr<Controller> Clone() const { return nullptr; }
 };
 
 /// What one run from one start gave.
@@ -69,6 +75,8 @@ struct ControlRun {
 struct EvaluationOptions {
   int starts = 20;
   std::uint64_t seed = 0;
+  /// Threads running starts at once when the controller can be cloned (<= 0: all cores).
+  int threads = 1;
   /// Called with the number of finished runs.
   std::function<void(int)> progress{};
 };

@@ -28,6 +28,8 @@
 //   auto runs = EvaluateController(task, controller, {.starts = 300, .seed = 1});
 #pragma once
 
+#include <memory>
+
 #include <Eigen/Core>
 
 #include "diffdyn/physics/control_task.h"
@@ -59,6 +61,7 @@ class LqrController final : public Controller {
   LqrController(const ControlTask& task, LqrSolution lqr) : task_(task), lqr_(std::move(lqr)) {}
   void Reset(const Eigen::VectorXd&, std::uint64_t) override {}
   Eigen::VectorXd Command(const Eigen::VectorXd& x) override;
+  std::unique_ptr<Controller> Clone() const override { return std::make_unique<LqrController>(task_, lqr_); }
   const LqrSolution& solution() const { return lqr_; }
 
  private:
