@@ -1,7 +1,15 @@
 // The exit-code contract on hostile input (DESIGN.md, "Exit codes"): bad input is
 // one line `error: ...` naming the option or file with exit 2, before anything is
 // written; no input file is ever replaced; no crash and no hang.
+#include <fcntl.h>
+#include <signal.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <thread>
+#include <vector>
 
 #include <filesystem>
 #include <fstream>
@@ -145,6 +153,42 @@ TEST_F(Hardening, AMegabyteOfInputIsNotEchoed) {
   std::ofstream(wide) << "t," << std::string(1 << 20, 'x') << "\n0,1\n";
   const CommandResult r = RunDiffdyn("eval --quiet --model pendulum --data " + wide);
   ExpectBadInput(r, wide);
+}
+
+// Ctrl-C during a long training run: the process dies of SIGINT promptly and leaves
+// nothing in its output folder (no model file, no temporary file).
+TEST_F(Hardening, CtrlCLeavesNoPartialFile) {
+  const std::filesystem::path folder = TempPath("hardening_interrupted");
+  std::filesystem::remove_all(folder);
+  std::filesystem::create_directories(folder);
+  const std::string out = (folder / "model.json").string();
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    const int null = open("/dev/null", O_WRONLY);
+    dup2(null, 1);
+    dup2(null, 2);
+    execl(DIFFDYN_EXE, "diffdyn", "train", "--data", data_.c_str(), "--model", "abs-nn", "--hidden", "32",
+          "--epochs", "1000000", "--out", out.c_str(), static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  ASSERT_EQ(kill(pid, SIGINT), 0);
+  int status = 0;
+  pid_t done = 0;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  while ((done = waitpid(pid, &status, WNOHANG)) == 0 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  if (done == 0) {
+    kill(pid, SIGKILL);
+    waitpid(pid, &status, 0);
+    FAIL() << "train did not end within 20 s of SIGINT";
+  }
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGINT) << "status " << status;
+  std::vector<std::string> left;
+  for (const auto& entry : std::filesystem::directory_iterator(folder)) left.push_back(entry.path().string());
+  EXPECT_TRUE(left.empty()) << left.front();
 }
 
 }  // namespace
