@@ -60,6 +60,22 @@ struct ActionCost {
     const double scale = 2.0 * beta * u_max / std::numbers::pi;
     return -scale * std::log(std::cos(std::numbers::pi * u[0] / (2.0 * u_max)));
   }
+
+  /// The convex conjugate g~(w) = max_u [w^T u - g(u)] (w: m):
+  ///   quadratic:   sum_j w_j^2 / (4 r_j);
+  ///   log-cosine:  (u_max / pi) [2 w atan(w / beta) - beta log(1 + w^2 / beta^2)].
+  double Conjugate(const Eigen::Ref<const Eigen::VectorXd>& w) const {
+    if (kind == Kind::kQuadratic) return (w.array().square() / (4.0 * r.array())).sum();
+    const double z = w[0] / beta;
+    return (u_max / std::numbers::pi) * (2.0 * w[0] * std::atan(z) - beta * std::log1p(z * z));
+  }
+
+  /// The maximiser u*(w) = grad g~(w) (m): w_j / (2 r_j), or (2 u_max / pi) atan(w / beta),
+  /// which stays inside (-u_max, u_max).
+  Eigen::VectorXd ConjugateGradient(const Eigen::Ref<const Eigen::VectorXd>& w) const {
+    if (kind == Kind::kQuadratic) return (w.array() / (2.0 * r.array())).matrix();
+    return Eigen::VectorXd::Constant(1, (2.0 * u_max / std::numbers::pi) * std::atan(w[0] / beta));
+  }
 };
 
 /// A control task (see the file comment). Sizes: n states (2 x joints), m actions.
