@@ -40,51 +40,109 @@ Eigen::MatrixXd LinearQuadraticHjb::SolutionMatrix() const {
   return SolveLqr(a_ - 0.5 * rho_ * Eigen::MatrixXd::Identity(n, n), b_, q_, r_).P;
 }
 
+Eigen::MatrixXd ValueFeatures::Encode(const Eigen::MatrixXd& x) const {
+  Eigen::MatrixXd z(size(static_cast<int>(x.rows())), x.cols());
+  Eigen::Index row = 0;
+  std::size_t next = 0;
+  for (Eigen::Index i = 0; i < x.rows(); ++i) {
+    if (next < periodic.size() && periodic[next] == i) {
+      z.row(row++) = x.row(i).array().sin().matrix();
+      z.row(row++) = x.row(i).array().cos().matrix();
+      ++next;
+    } else {
+      z.row(row++) = x.row(i);
+    }
+  }
+  return z;
+}
+
+Eigen::MatrixXd ValueFeatures::PullBack(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dvdz) const {
+  Eigen::MatrixXd p(x.rows(), x.cols());
+  Eigen::Index row = 0;
+  std::size_t next = 0;
+  for (Eigen::Index i = 0; i < x.rows(); ++i) {
+    if (next < periodic.size() && periodic[next] == i) {
+      // d sin / dx = cos, d cos / dx = -sin.
+      p.row(i) = dvdz.row(row).cwiseProduct(x.row(i).array().cos().matrix()) -
+                 dvdz.row(row + 1).cwiseProduct(x.row(i).array().sin().matrix());
+      row += 2;
+      ++next;
+    } else {
+      p.row(i) = dvdz.row(row++);
+    }
+  }
+  return p;
+}
+
+Eigen::MatrixXd ValueFeatures::PushForward(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dldp) const {
+  Eigen::MatrixXd g(size(static_cast<int>(x.rows())), x.cols());
+  Eigen::Index row = 0;
+  std::size_t next = 0;
+  for (Eigen::Index i = 0; i < x.rows(); ++i) {
+    if (next < periodic.size() && periodic[next] == i) {
+      g.row(row++) = dldp.row(i).cwiseProduct(x.row(i).array().cos().matrix());
+      g.row(row++) = -dldp.row(i).cwiseProduct(x.row(i).array().sin().matrix());
+      ++next;
+    } else {
+      g.row(row++) = dldp.row(i);
+    }
+  }
+  return g;
+}
+
 namespace {
 
-// p (n x B) from Forward's stacked 1 x nB Jacobian.
-Eigen::MatrixXd Unstack(const Eigen::MatrixXd& jac, int n, Eigen::Index batch) {
-  return Eigen::Map<const Eigen::MatrixXd>(jac.data(), n, batch);
+// dV/dz (n_z x B) from Forward's stacked 1 x n_z B Jacobian.
+Eigen::MatrixXd Unstack(const Eigen::MatrixXd& jac, Eigen::Index nz, Eigen::Index batch) {
+  return Eigen::Map<const Eigen::MatrixXd>(jac.data(), nz, batch);
+}
+
+void CheckNetwork(const Mlp<double>& net, int n, const ValueFeatures& features, const char* what) {
+  DIFFDYN_CHECK(net.num_inputs() == features.size(n) && net.num_outputs() == 1, what, ": the network must map ",
+                features.size(n), " features to 1 output, it maps ", net.num_inputs(), " to ", net.num_outputs());
+  for (std::size_t k = 0; k < features.periodic.size(); ++k) {
+    DIFFDYN_CHECK(features.periodic[k] >= 0 && features.periodic[k] < n &&
+                      (k == 0 || features.periodic[k] > features.periodic[k - 1]),
+                  what, ": periodic components must be increasing state indices below ", n);
+  }
 }
 
 }  // namespace
 
 void ValueAndGradient(const Mlp<double>& net, const Eigen::MatrixXd& x, Eigen::VectorXd* v, Eigen::MatrixXd* p,
-                      int threads) {
-  DIFFDYN_CHECK(net.num_outputs() == 1 && net.num_inputs() == x.rows(), "ValueAndGradient: the network must map ",
-                x.rows(), " inputs to 1 output");
+                      const ValueFeatures& features, int threads) {
+  CheckNetwork(net, static_cast<int>(x.rows()), features, "ValueAndGradient");
   MlpWorkspace ws(net.architecture(), static_cast<int>(x.cols()));
   Eigen::MatrixXd y, jac;
-  net.Forward(x, &y, &jac, &ws, threads);
+  net.Forward(features.Encode(x), &y, &jac, &ws, threads);
   *v = y.row(0).transpose();
-  *p = Unstack(jac, static_cast<int>(x.rows()), x.cols());
+  *p = features.PullBack(x, Unstack(jac, net.num_inputs(), x.cols()));
 }
 
 double ResidualLoss(const FirstOrderEquation& equation, const Mlp<double>& net, const Eigen::MatrixXd& x,
-                    Eigen::VectorXd* grad, MlpWorkspace* ws, int threads) {
-  const int n = equation.state_size();
-  const Eigen::Index b = x.cols();
+                    Eigen::VectorXd* grad, MlpWorkspace* ws, const ValueFeatures& features, int threads) {
+  const Eigen::Index b = x.cols(), nz = net.num_inputs();
   Eigen::MatrixXd y, jac, f_p;
   Eigen::VectorXd f, f_v;
-  net.Forward(x, &y, &jac, ws, threads);
-  equation.Evaluate(x, y.row(0).transpose(), Unstack(jac, n, b), &f, &f_v, &f_p);
+  net.Forward(features.Encode(x), &y, &jac, ws, threads);
+  equation.Evaluate(x, y.row(0).transpose(), features.PullBack(x, Unstack(jac, nz, b)), &f, &f_v, &f_p);
   if (grad) {
-    // dL/dV_i = 2 F_i F_V,i / B and dL/dp_i = 2 F_i F_p,i / B, p_i stacked as in jac.
+    // dL/dV_i = 2 F_i F_V,i / B and dL/dp_i = 2 F_i F_p,i / B, then through the features
+    // to dL/dz_i, stacked as in jac.
     const Eigen::VectorXd scale = (2.0 / static_cast<double>(b)) * f;
     const Eigen::MatrixXd gy = scale.cwiseProduct(f_v).transpose();
-    const Eigen::MatrixXd gp = f_p * scale.asDiagonal();
-    const Eigen::MatrixXd gjac = Eigen::Map<const Eigen::MatrixXd>(gp.data(), 1, n * b);
+    const Eigen::MatrixXd gz = features.PushForward(x, f_p * scale.asDiagonal());
+    const Eigen::MatrixXd gjac = Eigen::Map<const Eigen::MatrixXd>(gz.data(), 1, nz * b);
     net.Backward(gy, gjac, grad, nullptr, ws, threads);
   }
   return f.squaredNorm() / static_cast<double>(b);
 }
 
 TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::MatrixXd& states,
-                          const TrainOptions& options, Mlp<double>* net,
+                          const TrainOptions& options, Mlp<double>* net, const ValueFeatures& features,
                           const std::function<void(const EpochReport&)>& on_epoch) {
   const int n = equation.state_size();
-  DIFFDYN_CHECK(net->num_inputs() == n && net->num_outputs() == 1, "SolveResidual: the network must map ", n,
-                " inputs to 1 output, it maps ", net->num_inputs(), " to ", net->num_outputs());
+  CheckNetwork(*net, n, features, "SolveResidual");
   DIFFDYN_CHECK(states.rows() == n && states.cols() >= 2 && states.allFinite(), "SolveResidual: states must be ", n,
                 " x N with N >= 2, finite");
   std::vector<int> train, val;
@@ -102,10 +160,10 @@ TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::Matri
     for (std::size_t i = 0; i < positions.size(); ++i) {
       x.col(static_cast<Eigen::Index>(i)) = states.col(train[static_cast<std::size_t>(positions[i])]);
     }
-    return ResidualLoss(equation, *net, x, grad, &ws, options.threads);
+    return ResidualLoss(equation, *net, x, grad, &ws, features, options.threads);
   };
   problem.validation_loss = [&] {
-    return ResidualLoss(equation, *net, val_states, nullptr, &val_ws, options.threads);
+    return ResidualLoss(equation, *net, val_states, nullptr, &val_ws, features, options.threads);
   };
   return FitMinibatches(problem, options, &net->mutable_parameters(), on_epoch);
 }

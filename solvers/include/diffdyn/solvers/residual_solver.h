@@ -26,6 +26,7 @@
 #pragma once
 
 #include <functional>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -64,21 +65,38 @@ class LinearQuadraticHjb final : public FirstOrderEquation {
   double rho_;
 };
 
-/// V (1 x B as a vector of B) and p = dV/dx (n x B) of `net` at states x (n x B).
+/// The value network's inputs z = phi(x): each state component listed in `periodic`
+/// (0-based, increasing) enters as (sin x_i, cos x_i), so that V is periodic in it; the
+/// others enter as they are. p = dV/dx = (dz/dx)^T dV/dz.
+struct ValueFeatures {
+  std::vector<int> periodic;
+  /// The number of features for n states.
+  int size(int n) const { return n + static_cast<int>(periodic.size()); }
+  /// z (size(n) x B) of states x (n x B).
+  Eigen::MatrixXd Encode(const Eigen::MatrixXd& x) const;
+  /// p (n x B) from dV/dz (size(n) x B) at states x.
+  Eigen::MatrixXd PullBack(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dvdz) const;
+  /// dL/dz (size(n) x B) from dL/dp (n x B) at states x: the transpose of PullBack.
+  Eigen::MatrixXd PushForward(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dldp) const;
+};
+
+/// V (B) and p = dV/dx (n x B) of `net` over `features` at states x (n x B).
 void ValueAndGradient(const Mlp<double>& net, const Eigen::MatrixXd& x, Eigen::VectorXd* v, Eigen::MatrixXd* p,
-                      int threads = 1);
+                      const ValueFeatures& features = {}, int threads = 1);
 
 /// The mean squared residual L = mean_i F_i^2 of `net` at states x (n x B) and, if
 /// grad is not null, dL/dtheta (resized to net's parameter count), on workspace ws.
 double ResidualLoss(const FirstOrderEquation& equation, const Mlp<double>& net, const Eigen::MatrixXd& x,
-                    Eigen::VectorXd* grad, MlpWorkspace* ws, int threads = 1);
+                    Eigen::VectorXd* grad, MlpWorkspace* ws, const ValueFeatures& features = {},
+                    int threads = 1);
 
 /// Minimises the mean squared residual over the columns of `states` (n x N; a
 /// seeded fraction options.val_fraction held out) by Adam from net's parameters, in
-/// place (file comment). Losses in the result are mean squared residuals. Throws
-/// diffdyn::Error when net is not n -> 1 or the options are bad.
+/// place (file comment); the network sees `features` of the states. Losses in the
+/// result are mean squared residuals. Throws diffdyn::Error when net does not map
+/// features.size(n) inputs to 1 output or the options are bad.
 TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::MatrixXd& states,
-                          const TrainOptions& options, Mlp<double>* net,
+                          const TrainOptions& options, Mlp<double>* net, const ValueFeatures& features = {},
                           const std::function<void(const EpochReport&)>& on_epoch = {});
 
 }  // namespace diffdyn
