@@ -43,8 +43,10 @@ int main(int argc, char** argv) {
 
   // The value network and the sampled states.
   const int width = quick ? 32 : 64;
-  Mlp<double> net = MakeInitializedMlp({{2, width, width, 1}, {Activation::Softplus(), Activation::Softplus()}},
-                                       InitOptions::Ddn(), 1);
+  ValueFunction value = ValueFunction::Direct(
+      MakeInitializedMlp({{2, width, width, 1}, {Activation::Softplus(), Activation::Softplus()}}, InitOptions::Ddn(),
+                         1),
+      2);
   const Eigen::MatrixXd states = UniformStates(quick ? 2000 : 10000, 2);
   TrainOptions options;
   options.batch_size = 128;
@@ -57,7 +59,7 @@ int main(int argc, char** argv) {
   for (const double lr : {1e-3, 1e-4}) {
     options.learning_rate = lr;
     options.epochs = lr > 5e-4 ? epochs : epochs / 2;
-    const TrainResult r = SolveResidual(equation, states, options, &net);
+    const TrainResult r = SolveResidual(equation, states, options, &value);
     fmt::print("stage lr {:.0e}: {} epochs, mean F^2 {:.3e} -> {:.3e} (held out), {:.1f} ms per epoch\n", lr,
                r.epochs.size(), r.epochs.front().val_loss, r.final_val_loss, 1e3 * r.seconds_per_epoch);
   }
@@ -67,7 +69,7 @@ int main(int argc, char** argv) {
   const Eigen::MatrixXd x = UniformStates(1000, 4);
   Eigen::VectorXd v;
   Eigen::MatrixXd grad;
-  ValueAndGradient(net, x, &v, &grad);
+  value.Evaluate(x, &v, &grad);
   const Eigen::VectorXd truth = (x.cwiseProduct(p * x)).colwise().sum().transpose();
   const double v_error = (v - truth).norm() / truth.norm();
   const double p_error = (grad - 2.0 * p * x).norm() / (2.0 * p * x).norm();

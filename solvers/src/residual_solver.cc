@@ -92,64 +92,188 @@ Eigen::MatrixXd ValueFeatures::PushForward(const Eigen::MatrixXd& x, const Eigen
 
 namespace {
 
-// dV/dz (n_z x B) from Forward's stacked 1 x n_z B Jacobian.
-Eigen::MatrixXd Unstack(const Eigen::MatrixXd& jac, Eigen::Index nz, Eigen::Index batch) {
-  return Eigen::Map<const Eigen::MatrixXd>(jac.data(), nz, batch);
-}
+// The quadratic form's small matrices live on the stack: at most this many features.
+constexpr int kMaxQuadraticFeatures = 8;
+using Small = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxQuadraticFeatures, kMaxQuadraticFeatures>;
+using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxQuadraticFeatures, 1>;
 
-void CheckNetwork(const Mlp<double>& net, int n, const ValueFeatures& features, const char* what) {
-  DIFFDYN_CHECK(net.num_inputs() == features.size(n) && net.num_outputs() == 1, what, ": the network must map ",
-                features.size(n), " features to 1 output, it maps ", net.num_inputs(), " to ", net.num_outputs());
-  for (std::size_t k = 0; k < features.periodic.size(); ++k) {
-    DIFFDYN_CHECK(features.periodic[k] >= 0 && features.periodic[k] < n &&
-                      (k == 0 || features.periodic[k] > features.periodic[k - 1]),
-                  what, ": periodic components must be increasing state indices below ", n);
+// Output index of L_ik (i >= k), row by row.
+int TriangleIndex(int i, int k) { return i * (i + 1) / 2 + k; }
+
+// softplus(y) = log(1 + e^y) without overflow.
+double Softplus(double y) { return std::max(y, 0.0) + std::log1p(std::exp(-std::abs(y))); }
+
+// One sample of the quadratic form: L, its entries' first and second derivatives in y
+// (s1, s2), e = z - z0, S = L^T e and G = dS/dz (d x d).
+struct QuadraticSample {
+  Small l, s1, s2, g;
+  SmallVector e, s;
+  QuadraticSample(const Eigen::Ref<const Eigen::VectorXd>& y, const Eigen::Ref<const Eigen::MatrixXd>& jac,
+                  const Eigen::Ref<const Eigen::VectorXd>& z, const Eigen::VectorXd& z0, double epsilon) {
+    const int d = static_cast<int>(z.size());
+    l.setZero(d, d);
+    s1.setZero(d, d);
+    s2.setZero(d, d);
+    for (int i = 0; i < d; ++i) {
+      for (int k = 0; k <= i; ++k) {
+        const double yi = y[TriangleIndex(i, k)];
+        if (i == k) {
+          const double sigmoid = 1.0 / (1.0 + std::exp(-yi));
+          l(i, k) = Softplus(yi) + epsilon;
+          s1(i, k) = sigmoid;
+          s2(i, k) = sigmoid * (1.0 - sigmoid);
+        } else {
+          l(i, k) = yi;
+          s1(i, k) = 1.0;
+        }
+      }
+    }
+    e = z - z0;
+    s = l.transpose() * e;
+    // G_kj = L_jk [j >= k] + sum_{i >= k} e_i s1_ik dy_ik/dz_j.
+    g = l.transpose();
+    for (int k = 0; k < d; ++k) {
+      for (int i = k; i < d; ++i) g.row(k) += (e[i] * s1(i, k)) * jac.row(TriangleIndex(i, k));
+    }
   }
-}
+};
 
 }  // namespace
 
-void ValueAndGradient(const Mlp<double>& net, const Eigen::MatrixXd& x, Eigen::VectorXd* v, Eigen::MatrixXd* p,
-                      const ValueFeatures& features, int threads) {
-  CheckNetwork(net, static_cast<int>(x.rows()), features, "ValueAndGradient");
-  MlpWorkspace ws(net.architecture(), static_cast<int>(x.cols()));
-  Eigen::MatrixXd y, jac;
-  net.Forward(features.Encode(x), &y, &jac, &ws, threads);
-  *v = y.row(0).transpose();
-  *p = features.PullBack(x, Unstack(jac, net.num_inputs(), x.cols()));
+ValueFunction::ValueFunction(Mlp<double> net, int n, ValueFeatures features, ValueForm form, Eigen::VectorXd goal,
+                             double epsilon)
+    : net_(std::move(net)), n_(n), features_(std::move(features)), form_(form), goal_(std::move(goal)),
+      epsilon_(epsilon) {
+  DIFFDYN_CHECK(n >= 1, "ValueFunction: the state size must be positive, got ", n);
+  for (std::size_t k = 0; k < features_.periodic.size(); ++k) {
+    DIFFDYN_CHECK(features_.periodic[k] >= 0 && features_.periodic[k] < n &&
+                      (k == 0 || features_.periodic[k] > features_.periodic[k - 1]),
+                  "ValueFunction: periodic components must be increasing state indices below ", n);
+  }
+  const int d = features_.size(n);
+  DIFFDYN_CHECK(net_.num_inputs() == d && net_.num_outputs() == OutputsFor(form, d),
+                "ValueFunction: the network must map ", d, " features to ", OutputsFor(form, d),
+                " outputs, it maps ", net_.num_inputs(), " to ", net_.num_outputs());
+  if (form == ValueForm::kQuadratic) {
+    DIFFDYN_CHECK(d <= kMaxQuadraticFeatures, "ValueFunction: the quadratic form takes at most ",
+                  kMaxQuadraticFeatures, " features, got ", d);
+    DIFFDYN_CHECK(goal_.size() == n && goal_.allFinite(), "ValueFunction: the goal must be ", n, " finite values");
+    DIFFDYN_CHECK(epsilon > 0 && std::isfinite(epsilon), "ValueFunction: epsilon must be positive, got ", epsilon);
+    goal_features_ = features_.Encode(goal_);
+  }
 }
 
-double ResidualLoss(const FirstOrderEquation& equation, const Mlp<double>& net, const Eigen::MatrixXd& x,
-                    Eigen::VectorXd* grad, MlpWorkspace* ws, const ValueFeatures& features, int threads) {
-  const Eigen::Index b = x.cols(), nz = net.num_inputs();
-  Eigen::MatrixXd y, jac, f_p;
-  Eigen::VectorXd f, f_v;
-  net.Forward(features.Encode(x), &y, &jac, ws, threads);
-  equation.Evaluate(x, y.row(0).transpose(), features.PullBack(x, Unstack(jac, nz, b)), &f, &f_v, &f_p);
+ValueFunction ValueFunction::Direct(Mlp<double> net, int n, ValueFeatures features) {
+  return ValueFunction(std::move(net), n, std::move(features), ValueForm::kDirect, Eigen::VectorXd(), 1e-3);
+}
+
+ValueFunction ValueFunction::Quadratic(Mlp<double> net, const Eigen::VectorXd& goal, ValueFeatures features,
+                                       double epsilon) {
+  const int n = static_cast<int>(goal.size());
+  return ValueFunction(std::move(net), n, std::move(features), ValueForm::kQuadratic, goal, epsilon);
+}
+
+ValueWorkspace ValueFunction::MakeWorkspace(int max_batch, int chunk_size) const {
+  return ValueWorkspace{MlpWorkspace(net_.architecture(), max_batch, chunk_size, true), {}, {}, {}};
+}
+
+void ValueFunction::QuadraticHead(const ValueWorkspace& ws, Eigen::Index b, double* v,
+                                  Eigen::Ref<Eigen::VectorXd> dvdz) const {
+  const Eigen::Index d = ws.z.rows();
+  const QuadraticSample q(ws.y.col(b), ws.jac.middleCols(b * d, d), ws.z.col(b), goal_features_, epsilon_);
+  *v = q.s.squaredNorm();
+  dvdz = 2.0 * q.g.transpose() * q.s;
+}
+
+void ValueFunction::QuadraticHeadBackward(const ValueWorkspace& ws, Eigen::Index b, double gv,
+                                          const Eigen::Ref<const Eigen::VectorXd>& gdvdz,
+                                          Eigen::Ref<Eigen::VectorXd> gy, Eigen::Ref<Eigen::MatrixXd> gjac) const {
+  const int d = static_cast<int>(ws.z.rows());
+  const auto jac = ws.jac.middleCols(b * d, d);
+  const QuadraticSample q(ws.y.col(b), jac, ws.z.col(b), goal_features_, epsilon_);
+  // dvdz = 2 G^T S and V = S^T S: cotangents of G (2 S gdvdz^T) and of S.
+  const Small gg = 2.0 * q.s * gdvdz.transpose();
+  const SmallVector gs = 2.0 * q.g * gdvdz + 2.0 * gv * q.s;
+  for (int i = 0; i < d; ++i) {
+    for (int k = 0; k <= i; ++k) {
+      const int idx = TriangleIndex(i, k);
+      // L_ik enters S_k (times e_i) and G_ki; s1_ik and dy_ik/dz enter row k of G times e_i.
+      const double gl = gs[k] * q.e[i] + gg(k, i);
+      gjac.row(idx) = (q.e[i] * q.s1(i, k)) * gg.row(k);
+      const double gs1 = q.e[i] * gg.row(k).dot(jac.row(idx));
+      gy[idx] = gl * q.s1(i, k) + gs1 * q.s2(i, k);
+    }
+  }
+}
+
+void ValueFunction::Evaluate(const Eigen::MatrixXd& x, Eigen::VectorXd* v, Eigen::MatrixXd* p, ValueWorkspace* ws,
+                             int threads) const {
+  DIFFDYN_CHECK(x.rows() == n_, "ValueFunction: states must have ", n_, " rows, got ", x.rows());
+  const Eigen::Index b = x.cols(), d = net_.num_inputs();
+  ws->z = features_.Encode(x);
+  net_.Forward(ws->z, &ws->y, &ws->jac, &ws->mlp, threads);
+  v->resize(b);
+  Eigen::MatrixXd dvdz(d, b);
+  if (form_ == ValueForm::kDirect) {
+    *v = ws->y.row(0).transpose();
+    dvdz = Eigen::Map<const Eigen::MatrixXd>(ws->jac.data(), d, b);
+  } else {
+    for (Eigen::Index i = 0; i < b; ++i) QuadraticHead(*ws, i, &(*v)[i], dvdz.col(i));
+  }
+  *p = features_.PullBack(x, dvdz);
+}
+
+void ValueFunction::Evaluate(const Eigen::MatrixXd& x, Eigen::VectorXd* v, Eigen::MatrixXd* p) const {
+  ValueWorkspace ws = MakeWorkspace(std::max<int>(1, static_cast<int>(x.cols())));
+  Evaluate(x, v, p, &ws);
+}
+
+void ValueFunction::Backward(const Eigen::MatrixXd& x, const Eigen::VectorXd& gv, const Eigen::MatrixXd& gp,
+                             Eigen::VectorXd* grad, ValueWorkspace* ws, int threads) const {
+  const Eigen::Index b = x.cols(), d = net_.num_inputs(), m = net_.num_outputs();
+  DIFFDYN_CHECK(ws->z.cols() == b && gv.size() == b && gp.rows() == n_ && gp.cols() == b,
+                "ValueFunction::Backward: cotangents must match the last Evaluate's ", ws->z.cols(), " states");
+  const Eigen::MatrixXd gdvdz = features_.PushForward(x, gp);
+  Eigen::MatrixXd gy(m, b), gjac(m, d * b);
+  if (form_ == ValueForm::kDirect) {
+    gy = gv.transpose();
+    gjac = Eigen::Map<const Eigen::MatrixXd>(gdvdz.data(), 1, d * b);
+  } else {
+    for (Eigen::Index i = 0; i < b; ++i) {
+      QuadraticHeadBackward(*ws, i, gv[i], gdvdz.col(i), gy.col(i), gjac.middleCols(i * d, d));
+    }
+  }
+  net_.Backward(gy, gjac, grad, nullptr, &ws->mlp, threads);
+}
+
+double ResidualLoss(const FirstOrderEquation& equation, const ValueFunction& value, const Eigen::MatrixXd& x,
+                    Eigen::VectorXd* grad, ValueWorkspace* ws, int threads) {
+  const Eigen::Index b = x.cols();
+  Eigen::MatrixXd p, f_p;
+  Eigen::VectorXd v, f, f_v;
+  value.Evaluate(x, &v, &p, ws, threads);
+  equation.Evaluate(x, v, p, &f, &f_v, &f_p);
   if (grad) {
-    // dL/dV_i = 2 F_i F_V,i / B and dL/dp_i = 2 F_i F_p,i / B, then through the features
-    // to dL/dz_i, stacked as in jac.
+    // dL/dV_i = 2 F_i F_V,i / B and dL/dp_i = 2 F_i F_p,i / B.
     const Eigen::VectorXd scale = (2.0 / static_cast<double>(b)) * f;
-    const Eigen::MatrixXd gy = scale.cwiseProduct(f_v).transpose();
-    const Eigen::MatrixXd gz = features.PushForward(x, f_p * scale.asDiagonal());
-    const Eigen::MatrixXd gjac = Eigen::Map<const Eigen::MatrixXd>(gz.data(), 1, nz * b);
-    net.Backward(gy, gjac, grad, nullptr, ws, threads);
+    value.Backward(x, scale.cwiseProduct(f_v), f_p * scale.asDiagonal(), grad, ws, threads);
   }
   return f.squaredNorm() / static_cast<double>(b);
 }
 
 TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::MatrixXd& states,
-                          const TrainOptions& options, Mlp<double>* net, const ValueFeatures& features,
+                          const TrainOptions& options, ValueFunction* value,
                           const std::function<void(const EpochReport&)>& on_epoch) {
   const int n = equation.state_size();
-  CheckNetwork(*net, n, features, "SolveResidual");
+  DIFFDYN_CHECK(value->state_size() == n, "SolveResidual: the value function has ", value->state_size(),
+                " states, the equation ", n);
   DIFFDYN_CHECK(states.rows() == n && states.cols() >= 2 && states.allFinite(), "SolveResidual: states must be ", n,
                 " x N with N >= 2, finite");
   std::vector<int> train, val;
   SplitWindows(static_cast<int>(states.cols()), options.val_fraction, options.seed, &train, &val);
   const int batch = std::min<int>(options.batch_size, static_cast<int>(train.size()));
-  MlpWorkspace ws(net->architecture(), batch, options.chunk_size, true);
-  MlpWorkspace val_ws(net->architecture(), std::max<int>(1, static_cast<int>(val.size())), options.chunk_size, true);
+  ValueWorkspace ws = value->MakeWorkspace(batch, options.chunk_size);
+  ValueWorkspace val_ws = value->MakeWorkspace(std::max<int>(1, static_cast<int>(val.size())), options.chunk_size);
   const Eigen::MatrixXd val_states = states(Eigen::all, val);
   Eigen::MatrixXd x;
   MinibatchProblem problem;
@@ -160,12 +284,12 @@ TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::Matri
     for (std::size_t i = 0; i < positions.size(); ++i) {
       x.col(static_cast<Eigen::Index>(i)) = states.col(train[static_cast<std::size_t>(positions[i])]);
     }
-    return ResidualLoss(equation, *net, x, grad, &ws, features, options.threads);
+    return ResidualLoss(equation, *value, x, grad, &ws, options.threads);
   };
   problem.validation_loss = [&] {
-    return ResidualLoss(equation, *net, val_states, nullptr, &val_ws, features, options.threads);
+    return ResidualLoss(equation, *value, val_states, nullptr, &val_ws, options.threads);
   };
-  return FitMinibatches(problem, options, &net->mutable_parameters(), on_epoch);
+  return FitMinibatches(problem, options, &value->mutable_net()->mutable_parameters(), on_epoch);
 }
 
 }  // namespace diffdyn

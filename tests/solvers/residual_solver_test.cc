@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -28,9 +29,24 @@ Eigen::MatrixXd UniformStates(int count, std::uint64_t seed) {
   return x;
 }
 
-Mlp<double> SmallNet(int width, std::uint64_t seed) {
-  return MakeInitializedMlp({{2, width, width, 1}, {Activation::Softplus(), Activation::Softplus()}},
-                            InitOptions::Ddn(), seed);
+ValueFunction SmallValue(int width, std::uint64_t seed) {
+  return ValueFunction::Direct(
+      MakeInitializedMlp({{2, width, width, 1}, {Activation::Softplus(), Activation::Softplus()}}, InitOptions::Ddn(),
+                         seed),
+      2);
+}
+
+// Every form and feature choice of ValueFunction on 2 states: direct on raw inputs,
+// direct on (sin, cos) of x_0, quadratic around a goal on (sin, cos) of x_0.
+std::vector<ValueFunction> ValueFunctions(std::uint64_t seed) {
+  const auto net = [&](int inputs, int outputs) {
+    return MakeInitializedMlp({{inputs, 8, 8, outputs}, {Activation::Softplus(), Activation::Tanh()}},
+                              InitOptions::Ddn(), seed);
+  };
+  Eigen::VectorXd goal(2);
+  goal << 0.3, -0.2;
+  return {ValueFunction::Direct(net(2, 1), 2), ValueFunction::Direct(net(3, 1), 2, ValueFeatures{{0}}),
+          ValueFunction::Quadratic(net(3, 6), goal, ValueFeatures{{0}}), ValueFunction::Quadratic(net(2, 3), goal)};
 }
 
 TEST(LinearQuadraticHjb, QuadraticSolutionHasZeroResidual) {
@@ -47,61 +63,86 @@ TEST(LinearQuadraticHjb, QuadraticSolutionHasZeroResidual) {
   EXPECT_GT(f.cwiseAbs().maxCoeff(), 1e-2);
 }
 
-// With raw inputs and with the first component as (sin, cos) features.
+// For every form: the loss gradient against central differences in the parameters.
 TEST(ResidualLoss, GradientMatchesCentralDifferences) {
   const LinearQuadraticHjb equation = Oscillator();
-  for (const ValueFeatures& features : {ValueFeatures{}, ValueFeatures{{0}}}) {
-    Mlp<double> net = MakeInitializedMlp({{features.size(2), 8, 8, 1}, {Activation::Softplus(), Activation::Softplus()}},
-                                         InitOptions::Ddn(), 2);
+  int form = 0;
+  for (ValueFunction value : ValueFunctions(2)) {
     const Eigen::MatrixXd x = UniformStates(7, 3);
-    MlpWorkspace ws(net.architecture(), 7);
+    ValueWorkspace ws = value.MakeWorkspace(7);
     Eigen::VectorXd grad;
-    ResidualLoss(equation, net, x, &grad, &ws, features);
+    ResidualLoss(equation, value, x, &grad, &ws);
     const double h = 1e-6;
     double worst = 0.0;
-    for (Eigen::Index k = 0; k < net.num_parameters(); k += 5) {
-      const double saved = net.mutable_parameters()[k];
-      net.mutable_parameters()[k] = saved + h;
-      const double up = ResidualLoss(equation, net, x, nullptr, &ws, features);
-      net.mutable_parameters()[k] = saved - h;
-      const double down = ResidualLoss(equation, net, x, nullptr, &ws, features);
-      net.mutable_parameters()[k] = saved;
+    Eigen::VectorXd& theta = value.mutable_net()->mutable_parameters();
+    for (Eigen::Index k = 0; k < theta.size(); k += 3) {
+      const double saved = theta[k];
+      theta[k] = saved + h;
+      const double up = ResidualLoss(equation, value, x, nullptr, &ws);
+      theta[k] = saved - h;
+      const double down = ResidualLoss(equation, value, x, nullptr, &ws);
+      theta[k] = saved;
       worst = std::max(worst, std::abs((up - down) / (2 * h) - grad[k]) / (1.0 + std::abs(grad[k])));
     }
-    EXPECT_LT(worst, 1e-6) << features.periodic.size();
+    EXPECT_LT(worst, 1e-6) << "form " << form++;
   }
 }
 
-// dV/dx through the (sin, cos) features against central differences of V in x.
-TEST(ValueFeatures, GradientPullsBackThroughSinCos) {
-  const ValueFeatures features{{0}};
-  const Mlp<double> net =
-      MakeInitializedMlp({{3, 8, 1}, {Activation::Softplus()}}, InitOptions::Ddn(), 4);
-  const Eigen::MatrixXd x = UniformStates(5, 8);
-  Eigen::VectorXd v, up, down;
-  Eigen::MatrixXd p, dummy;
-  ValueAndGradient(net, x, &v, &p, features);
-  const double h = 1e-6;
-  for (int i = 0; i < 2; ++i) {
-    Eigen::MatrixXd xu = x, xd = x;
-    xu.row(i).array() += h;
-    xd.row(i).array() -= h;
-    ValueAndGradient(net, xu, &up, &dummy, features);
-    ValueAndGradient(net, xd, &down, &dummy, features);
-    EXPECT_LT(((up - down) / (2 * h) - p.row(i).transpose()).cwiseAbs().maxCoeff(), 1e-8);
+// For every form: dV/dx against central differences of V in x; periodicity in x_0
+// where it enters as (sin, cos).
+TEST(ValueFunction, GradientMatchesCentralDifferencesOfV) {
+  int form = 0;
+  for (const ValueFunction& value : ValueFunctions(4)) {
+    const Eigen::MatrixXd x = UniformStates(5, 8);
+    Eigen::VectorXd v, up, down;
+    Eigen::MatrixXd p, dummy;
+    value.Evaluate(x, &v, &p);
+    const double h = 1e-6;
+    for (int i = 0; i < 2; ++i) {
+      Eigen::MatrixXd xu = x, xd = x;
+      xu.row(i).array() += h;
+      xd.row(i).array() -= h;
+      value.Evaluate(xu, &up, &dummy);
+      value.Evaluate(xd, &down, &dummy);
+      EXPECT_LT(((up - down) / (2 * h) - p.row(i).transpose()).cwiseAbs().maxCoeff(), 1e-7) << "form " << form;
+    }
+    if (!value.features().periodic.empty()) {
+      Eigen::MatrixXd shifted = x;
+      shifted.row(0).array() += 2 * std::numbers::pi;
+      value.Evaluate(shifted, &up, &dummy);
+      EXPECT_LT((up - v).cwiseAbs().maxCoeff(), 1e-12) << "form " << form;
+    }
+    ++form;
   }
-  // Periodic in x_0.
-  Eigen::MatrixXd shifted = x;
-  shifted.row(0).array() += 2 * std::numbers::pi;
-  ValueAndGradient(net, shifted, &up, &dummy, features);
-  EXPECT_LT((up - v).cwiseAbs().maxCoeff(), 1e-12);
+}
+
+// The quadratic form is positive away from the goal and zero with zero gradient at it
+// (also at the goal shifted by a period of the periodic component).
+TEST(ValueFunction, QuadraticFormVanishesOnlyAtTheGoal) {
+  for (const ValueFunction& value : ValueFunctions(6)) {
+    if (value.form() != ValueForm::kQuadratic) continue;
+    Eigen::MatrixXd x = value.goal().replicate(1, 3);
+    if (!value.features().periodic.empty()) x(0, 1) += 2 * std::numbers::pi;
+    x(0, 2) += 0.05;
+    x(1, 2) -= 0.05;
+    Eigen::VectorXd v;
+    Eigen::MatrixXd p;
+    value.Evaluate(x, &v, &p);
+    EXPECT_LT(std::abs(v[0]), 1e-15);
+    EXPECT_LT(std::abs(v[1]), 1e-12);
+    EXPECT_LT(p.leftCols(2).cwiseAbs().maxCoeff(), 1e-6);
+    EXPECT_GT(v[2], 0.0);
+    const Eigen::MatrixXd states = UniformStates(200, 9);
+    value.Evaluate(states, &v, &p);
+    EXPECT_GT(v.minCoeff(), 0.0);
+  }
 }
 
 // Residual minimisation recovers the Riccati value function to about a percent
 // (measured 1.3 % for V and 2.2 % for dV/dx, root mean square over held-out states).
 TEST(SolveResidual, FindsTheRiccatiValueFunction) {
   const LinearQuadraticHjb equation = Oscillator();
-  Mlp<double> net = SmallNet(32, 4);
+  ValueFunction value = SmallValue(32, 4);
   TrainOptions options;
   options.epochs = 400;
   options.batch_size = 128;
@@ -110,17 +151,17 @@ TEST(SolveResidual, FindsTheRiccatiValueFunction) {
   options.seed = 5;
   options.progress = false;
   const Eigen::MatrixXd states = UniformStates(2000, 6);
-  const TrainResult first = SolveResidual(equation, states, options, &net);
+  const TrainResult first = SolveResidual(equation, states, options, &value);
   options.epochs = 200;
   options.learning_rate = 1e-4;  // a second stage at a tenth of the step
-  const TrainResult second = SolveResidual(equation, states, options, &net);
+  const TrainResult second = SolveResidual(equation, states, options, &value);
   EXPECT_LT(second.final_val_loss, 1e-3 * first.epochs.front().val_loss);
 
   const Eigen::MatrixXd p = equation.SolutionMatrix();
   const Eigen::MatrixXd x = UniformStates(500, 7);
   Eigen::VectorXd v;
   Eigen::MatrixXd grad;
-  ValueAndGradient(net, x, &v, &grad);
+  value.Evaluate(x, &v, &grad);
   const Eigen::VectorXd truth = (x.cwiseProduct(p * x)).colwise().sum().transpose();
   const double scale = std::sqrt(truth.squaredNorm() / 500.0);
   EXPECT_LT(std::sqrt((v - truth).squaredNorm() / 500.0), 0.02 * scale);
@@ -129,8 +170,14 @@ TEST(SolveResidual, FindsTheRiccatiValueFunction) {
 
 TEST(SolveResidual, RefusesANetworkOfTheWrongShape) {
   const LinearQuadraticHjb equation = Oscillator();
-  Mlp<double> net = MakeInitializedMlp({{3, 4, 1}, {Activation::Softplus()}}, InitOptions::Ddn(), 1);
-  EXPECT_THROW(SolveResidual(equation, UniformStates(10, 1), TrainOptions{}, &net), Error);
+  const auto net = [](int inputs, int outputs) {
+    return MakeInitializedMlp({{inputs, 4, outputs}, {Activation::Softplus()}}, InitOptions::Ddn(), 1);
+  };
+  EXPECT_THROW(ValueFunction::Direct(net(3, 1), 2), Error);
+  EXPECT_THROW(ValueFunction::Quadratic(net(2, 1), Eigen::Vector2d::Zero()), Error);
+  EXPECT_THROW(ValueFunction::Quadratic(net(2, 3), Eigen::Vector2d::Zero(), {}, 0.0), Error);
+  ValueFunction three = ValueFunction::Direct(net(3, 1), 3);
+  EXPECT_THROW(SolveResidual(equation, UniformStates(10, 1), TrainOptions{}, &three), Error);
   EXPECT_THROW(LinearQuadraticHjb(Eigen::MatrixXd::Identity(2, 2), Eigen::MatrixXd::Ones(2, 1),
                                   Eigen::MatrixXd::Identity(2, 2), -Eigen::MatrixXd::Identity(1, 1), 0.5),
                Error);
