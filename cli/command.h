@@ -70,5 +70,6 @@ void RegisterTrainCommand(CLI::App& app);
 void RegisterEvalCommand(CLI::App& app);
 void RegisterPushCommand(CLI::App& app);
 void RegisterControlCommand(CLI::App& app);
+void RegisterHjbCommand(CLI::App& app);
 
 }  // namespace diffdyn::cli

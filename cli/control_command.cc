@@ -4,13 +4,16 @@
 //                   [--samples 1000] [--horizon 1.0] [--dt 0.04] [--out DIR] [--json]
 //   diffdyn control --system pendulum --controller lqr --starts 300 --seed 1
 //   diffdyn control --system pendulum --controller shooting --starts 300 --seed 1 [--iterations 50]
+//   diffdyn control --system pendulum --controller hjb --model value.json --starts 300 --seed 1
 //
 // `lqr` is the regulator of the task's own analytic model linearised at the goal
 // (solvers/lqr.h), clipped to the bounds by the evaluator. `shooting` solves the
 // task's optimal-control problem from each start by multiple shooting on the task's
 // own analytic model (solvers/multiple_shooting.h) and replays the actions open loop.
-// Neither takes --model. Controllers that can be copied (lqr, shooting) run their
-// starts on --threads threads.
+// Neither takes --model. `hjb` acts by u*(x, dV/dx) of the value function in --model
+// (a file of kind value, written by `diffdyn hjb` for the same task; solvers/hjb.h).
+// Controllers that can be copied (lqr, shooting, hjb) run their starts on --threads
+// threads.
 //
 // The task (physics/control_task.h) gives the plant, the cost, the success test and
 // the start distribution; the evaluator (solvers/control.h) runs the controller on
@@ -37,6 +40,7 @@
 #include "diffdyn/autodiff_ode/progress.h"
 #include "diffdyn/physics/control_task.h"
 #include "diffdyn/solvers/control.h"
+#include "diffdyn/solvers/hjb.h"
 #include "diffdyn/solvers/lqr.h"
 #include "diffdyn/solvers/multiple_shooting.h"
 #include "diffdyn/solvers/load_model.h"
@@ -116,7 +120,18 @@ void RunControl(const ControlCommandOptions& o) {
   std::string extra;  // what the text summary adds about the controller
   double riccati_residual = -1.0;
   const MultipleShootingController* shooting = nullptr;
-  if (o.controller == "lqr" || o.controller == "shooting") {
+  ValueFunction value;
+  std::string model_kind;
+  if (o.controller == "hjb") {
+    DIFFDYN_CHECK(!o.model.empty() && o.model != o.system,
+                  "--controller hjb needs --model, a value-function file written by `diffdyn hjb`");
+    std::string value_task;
+    value = LoadValueFunction(o.model, &value_task);
+    DIFFDYN_CHECK(value_task == o.system, o.model.substr(0, 200), ": a value function of the ",
+                  value_task.substr(0, 60), " task, not of --system ", o.system);
+    owned = std::make_unique<HjbController>(task, value);
+    model_kind = "value";
+  } else if (o.controller == "lqr" || o.controller == "shooting") {
     DIFFDYN_CHECK(o.model.empty() || o.model == o.system, "--model ", o.model.substr(0, 80), ": ", o.controller,
                   " uses the task's own analytic model (omit --model)");
     model = TaskModel(task, task.period, 1);
@@ -134,10 +149,11 @@ void RunControl(const ControlCommandOptions& o) {
     }
     extra = fmt::format("; K = [{}] (column-major), Riccati residual {:.1e}", gains, riccati_residual);
     owned = std::move(lqr);
-  } else {
+  } else if (o.controller == "mppi") {
     model = PlanningModel(o, task);
     owned = std::make_unique<MppiController>(task, *model, o.mppi);
   }
+  if (model) model_kind = model->kind();
   Controller& controller = *owned;
   if (!o.out.empty()) {
     std::error_code ec;
@@ -179,7 +195,7 @@ void RunControl(const ControlCommandOptions& o) {
                {"ci95_high", high},            {"mean_cost", cost_sum / o.starts},
                {"median_cost", Percentile(costs, 0.5)}, {"p90_cost", Percentile(costs, 0.9)},
                {"max_abs_u", max_abs_u},       {"ms_per_command", ms},
-               {"model", o.model.empty() ? o.system : o.model}, {"model_kind", model->kind()},
+               {"model", o.model.empty() ? o.system : o.model}, {"model_kind", model_kind},
                {"hold", controller.hold()},    {"seed", o.common.seed}});
     if (riccati_residual >= 0) summary["riccati_residual"] = riccati_residual;
     if (shooting) {
@@ -199,7 +215,7 @@ void RunControl(const ControlCommandOptions& o) {
                         seconds_sum / o.starts, t.largest_defect, t.largest_shooting_defect, t.iterations);
   }
   fmt::print("{} on the {} task with {} ({}), {} starts: success {}/{} = {:.0f} % (95 % interval {:.0f}-{:.0f} %)\n",
-             o.controller, o.system, o.model.empty() ? o.system : o.model, model->kind(), o.starts, successes,
+             o.controller, o.system, o.model.empty() ? o.system : o.model, model_kind, o.starts, successes,
              o.starts, 100 * rate, 100 * low, 100 * high);
   fmt::print("cost mean {:.2f}, median {:.2f}, 90th percentile {:.2f}; max |u| {:.3f}; {:.2f} ms per command "
              "(median), action held {} period(s){}\n",
@@ -217,11 +233,13 @@ void RegisterControlCommand(CLI::App& app) {
       ->capture_default_str();
   command->add_option("--controller", o->controller,
                       "Controller: mppi (over --model), lqr (the task's model linearised at the goal, clipped) "
-                      "or shooting (multiple shooting per start, replayed open loop)")
-      ->check(CLI::IsMember({"mppi", "lqr", "shooting"}))
+                      "shooting (multiple shooting per start, replayed open loop) or hjb (the feedback policy of the "
+                      "value function in --model)")
+      ->check(CLI::IsMember({"mppi", "lqr", "shooting", "hjb"}))
       ->capture_default_str();
   command->add_option("--model", o->model,
-                      "Model to plan with: a model file, or the task's system name (default: the task's analytic model)");
+                      "Model to plan with: a model file, or the task's system name (default: the task's analytic model); "
+                      "for hjb the value-function file");
   command->add_option("--starts", o->starts, "Seeded start states, 1 to 100000")
       ->check(Bounded(1, 100000))->capture_default_str();
   command->add_option("--dt", o->dt, "Planning step (s) of analytic and extended-physics models, a multiple of 8 ms")

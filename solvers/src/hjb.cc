@@ -1,8 +1,11 @@
 #include "diffdyn/solvers/hjb.h"
 
+#include <chrono>
 #include <cmath>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/init.h"
 
 namespace diffdyn {
 
@@ -58,6 +61,155 @@ void TaskHjb::Evaluate(const Eigen::MatrixXd& x, const Eigen::VectorXd& v, const
     (*f)[i] = rho_ * v[i] - task_.StateCost(x.col(i)) - p.col(i).dot(a) + task_.action_cost.Conjugate(w);
     f_p->col(i) = -(a + b * u);
   }
+}
+
+TrainOptions HjbOptions::DefaultTrain() {
+  TrainOptions t;
+  t.epochs = 100;
+  t.learning_rate = 1e-3;
+  t.batch_size = 256;
+  t.val_fraction = 0.05;
+  t.progress = false;
+  return t;
+}
+
+void HjbOptions::Validate() const {
+  DIFFDYN_CHECK(!hidden.empty() && hidden.size() <= 16, "hjb: between 1 and 16 hidden layers, got ", hidden.size());
+  for (int w : hidden) DIFFDYN_CHECK(w >= 1 && w <= 4096, "hjb: hidden widths must be in [1, 4096], got ", w);
+  DIFFDYN_CHECK(std::isfinite(rho_start) && std::isfinite(rho_final) && rho_final > 0 && rho_start >= rho_final,
+                "hjb: the discounts need rho_start >= rho_final > 0, got ", rho_start, " and ", rho_final);
+  DIFFDYN_CHECK(stages >= 1 && stages <= 1000, "hjb: stages must be in [1, 1000], got ", stages);
+  DIFFDYN_CHECK(polish_stages >= 0 && polish_stages <= 1000, "hjb: polish stages must be in [0, 1000], got ",
+                polish_stages);
+  DIFFDYN_CHECK(samples >= 2 && samples <= 10000000, "hjb: samples must be in [2, 1e7], got ", samples);
+}
+
+ValueFunction MakeTaskValueFunction(const ControlTask& task, const HjbOptions& options) {
+  options.Validate();
+  ValueFeatures features;
+  for (int i = 0; i < task.state_size(); ++i) {
+    if (task.periodic[static_cast<std::size_t>(i)]) features.periodic.push_back(i);
+  }
+  const int d = features.size(task.state_size());
+  MlpArchitecture arch;
+  arch.sizes.push_back(d);
+  for (int w : options.hidden) {
+    arch.sizes.push_back(w);
+    arch.activations.push_back(options.activation);
+  }
+  arch.sizes.push_back(ValueFunction::OutputsFor(ValueForm::kQuadratic, d));
+  return ValueFunction::Quadratic(MakeInitializedMlp(arch, InitOptions::Ddn(), options.seed), task.goal, features);
+}
+
+void SolveHjb(const ControlTask& task, const HjbOptions& options, ValueFunction* value,
+              const std::function<void(const HjbStageReport&)>& on_stage) {
+  options.Validate();
+  const int n = task.state_size();
+  DIFFDYN_CHECK(value->state_size() == n, "hjb: the value function has ", value->state_size(), " states, the task ",
+                n);
+  DIFFDYN_CHECK(task.domain_low.size() == n && task.domain_high.size() == n && task.domain_low.allFinite() &&
+                    task.domain_high.allFinite() && (task.domain_low.array() < task.domain_high.array()).all(),
+                "hjb: the task has no finite state domain to learn over");
+  TaskHjb hjb(task, options.rho_start);
+  const int total = options.stages + options.polish_stages;
+  for (int k = 0; k < total; ++k) {
+    const auto start = std::chrono::steady_clock::now();
+    // The discount of stage k (geometric, then held) and its learning rate.
+    const double fraction = options.stages == 1 ? 1.0 : std::min(1.0, k / double(options.stages - 1));
+    hjb.set_rho(options.rho_start * std::pow(options.rho_final / options.rho_start, fraction));
+    TrainOptions train = options.train;
+    if (k >= options.stages) train.learning_rate /= std::pow(3.0, k - options.stages + 1);
+    train.seed = SplitMix64Hash(options.seed * 1000 + static_cast<std::uint64_t>(k));
+    // Fresh uniform states over the domain.
+    Rng rng = TrajectoryRng(options.seed, static_cast<std::uint64_t>(k));
+    Eigen::MatrixXd states(n, options.samples);
+    for (int j = 0; j < options.samples; ++j) {
+      for (int i = 0; i < n; ++i) states(i, j) = Uniform(rng, task.domain_low[i], task.domain_high[i]);
+    }
+    HjbStageReport report{k, total, hjb.rho(), train.learning_rate, SolveResidual(hjb, states, train, value), 0.0};
+    if (!std::isfinite(report.result.final_train_loss) || !value->net().parameters().allFinite()) {
+      throw NumericalError(StrCat("hjb: stage ", k + 1, " (rho ", hjb.rho(), ") diverged: the residual is ",
+                                  report.result.final_train_loss, " (try a smaller --lr); nothing written"));
+    }
+    report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (on_stage) on_stage(report);
+  }
+}
+
+HjbController::HjbController(const ControlTask& task, const ValueFunction& value)
+    : task_(task), value_(value), hjb_(task, 1.0), ws_(value.MakeWorkspace(1)) {
+  DIFFDYN_CHECK(value.state_size() == task.state_size(), "hjb: the value function has ", value.state_size(),
+                " states, the task ", task.state_size());
+}
+
+Eigen::VectorXd HjbController::Command(const Eigen::VectorXd& x) {
+  value_.Evaluate(x, &v_, &p_, &ws_);
+  return hjb_.Policy(x, p_.col(0));
+}
+
+namespace {
+
+// Checks a "value" architecture object and returns its network's architecture.
+MlpArchitecture ValueArchitectureFromJson(const nlohmann::json& j, ValueFunction* shape) {
+  DIFFDYN_CHECK(j.is_object() && j.contains("task") && j["task"].is_string() && j.contains("form") &&
+                    j["form"] == "quadratic" && j.contains("goal") && j["goal"].is_array() &&
+                    j.contains("periodic") && j["periodic"].is_array() && j.contains("epsilon") &&
+                    j["epsilon"].is_number() && j.contains("mlp"),
+                "architecture must have task, form \"quadratic\", goal, periodic, epsilon and mlp");
+  const MlpArchitecture arch = MlpArchitectureFromJson(j["mlp"]);
+  DIFFDYN_CHECK(j["goal"].size() >= 1 && j["goal"].size() <= 64, "goal must have 1 to 64 values");
+  Eigen::VectorXd goal(static_cast<Eigen::Index>(j["goal"].size()));
+  for (std::size_t i = 0; i < j["goal"].size(); ++i) {
+    DIFFDYN_CHECK(j["goal"][i].is_number(), "goal values must be numbers");
+    goal[static_cast<Eigen::Index>(i)] = j["goal"][i].get<double>();
+  }
+  ValueFeatures features;
+  for (const auto& i : j["periodic"]) {
+    DIFFDYN_CHECK(i.is_number_integer() && i.get<long long>() >= 0 && i.get<long long>() < goal.size(),
+                  "periodic entries must be state indices below ", goal.size());
+    features.periodic.push_back(i.get<int>());
+  }
+  // The constructor checks sizes, order, goal and epsilon.
+  *shape = ValueFunction::Quadratic(Mlp<double>(arch), goal, features, j["epsilon"].get<double>());
+  return arch;
+}
+
+void RegisterValueKind() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    RegisterModelKind("value", [](const nlohmann::json& j) {
+      ValueFunction shape;
+      return ValueArchitectureFromJson(j, &shape).num_parameters();
+    });
+  });
+}
+
+}  // namespace
+
+void SaveValueFunction(const std::filesystem::path& path, const ValueFunction& value, const std::string& task,
+                       const nlohmann::json& provenance, const nlohmann::json& metrics) {
+  DIFFDYN_CHECK(value.form() == ValueForm::kQuadratic, path.string(), ": only the quadratic form is saved");
+  RegisterValueKind();
+  const nlohmann::json architecture = {{"task", task},
+                                       {"form", "quadratic"},
+                                       {"periodic", value.features().periodic},
+                                       {"goal", std::vector<double>(value.goal().begin(), value.goal().end())},
+                                       {"epsilon", value.epsilon()},
+                                       {"mlp", MlpArchitectureToJson(value.net().architecture())}};
+  SaveModelFile(path, ModelFile{"value", architecture, value.net().parameters(), provenance, metrics, nullptr});
+}
+
+ValueFunction LoadValueFunction(const std::filesystem::path& path, std::string* task, ModelFile* contents) {
+  RegisterValueKind();
+  ModelFile file = LoadModelFile(path);
+  DIFFDYN_CHECK(file.kind == "value", path.string(), ": model kind is '", file.kind, "', expected value");
+  ValueFunction shape;
+  ValueArchitectureFromJson(file.architecture, &shape);
+  *task = file.architecture["task"].get<std::string>();
+  ValueFunction value = ValueFunction::Quadratic(Mlp<double>(shape.net().architecture(), file.parameters),
+                                                 shape.goal(), shape.features(), shape.epsilon());
+  if (contents) *contents = std::move(file);
+  return value;
 }
 
 }  // namespace diffdyn

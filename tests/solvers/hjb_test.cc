@@ -1,9 +1,11 @@
 // The task HJB: the action cost's conjugate against a brute-force maximum, the
 // control-affine split against the plant's dynamics, F_p against central differences,
-// and the policy inside the bounds.
+// and the policy inside the bounds; the homotopy solver's residual, determinism and
+// value files, and its controller.
 #include "diffdyn/solvers/hjb.h"
 
 #include <cmath>
+#include <filesystem>
 
 #include <gtest/gtest.h>
 
@@ -85,6 +87,91 @@ TEST(TaskHjb, PartialsMatchCentralDifferences) {
   // The policy stays inside the bounds however steep V is.
   EXPECT_LT(std::abs(hjb.Policy(x.col(0), 1e6 * p.col(0))[0]), task.action_cost.u_max);
   EXPECT_THROW(TaskHjb(task, 0.0), Error);
+}
+
+// A small homotopy: 3 stages of 4 epochs on 2000 states, 16 wide.
+HjbOptions SmallHjb(int threads) {
+  HjbOptions o;
+  o.hidden = {16, 16};
+  o.stages = 2;
+  o.polish_stages = 1;
+  o.samples = 2000;
+  o.rho_start = 2.0;
+  o.rho_final = 0.5;
+  o.train.epochs = 4;
+  o.train.threads = threads;
+  o.seed = 3;
+  return o;
+}
+
+// Stages in order with the discounts of the schedule; the residual is finite and
+// falls within the first stage; the same seed gives the same parameters at 1 and 2
+// threads.
+TEST(SolveHjb, AnnealsTheDiscountDeterministically) {
+  const ControlTask task = ControlTaskByName("pendulum");
+  std::vector<HjbStageReport> reports;
+  ValueFunction value = MakeTaskValueFunction(task, SmallHjb(1));
+  SolveHjb(task, SmallHjb(1), &value, [&](const HjbStageReport& r) { reports.push_back(r); });
+  ASSERT_EQ(reports.size(), 3u);
+  EXPECT_DOUBLE_EQ(reports[0].rho, 2.0);
+  EXPECT_NEAR(reports[1].rho, 0.5, 1e-12);
+  EXPECT_NEAR(reports[2].rho, 0.5, 1e-12);
+  EXPECT_NEAR(reports[2].learning_rate, reports[1].learning_rate / 3.0, 1e-15);
+  for (const HjbStageReport& r : reports) EXPECT_TRUE(std::isfinite(r.result.final_val_loss));
+  EXPECT_LT(reports[0].result.epochs.back().train_loss, 0.5 * reports[0].result.epochs.front().train_loss);
+
+  ValueFunction again = MakeTaskValueFunction(task, SmallHjb(2));
+  SolveHjb(task, SmallHjb(2), &again);
+  EXPECT_EQ(again.net().parameters(), value.net().parameters());
+}
+
+// The structured value is zero at the goal and positive elsewhere; the controller's
+// actions stay inside the bounds; a saved file loads back to the same V.
+TEST(SolveHjb, ValueFileRoundTripsAndTheControllerIsBounded) {
+  const ControlTask task = ControlTaskByName("pendulum");
+  ValueFunction value = MakeTaskValueFunction(task, SmallHjb(1));
+  SolveHjb(task, SmallHjb(1), &value);
+  const std::filesystem::path path = std::filesystem::path(::testing::TempDir()) / "hjb_value.json";
+  SaveValueFunction(path, value, "pendulum", {{"seed", 3}});
+  std::string name;
+  const ValueFunction back = LoadValueFunction(path, &name);
+  EXPECT_EQ(name, "pendulum");
+  Rng rng(4);
+  Eigen::MatrixXd x(2, 50);
+  for (int j = 0; j < 50; ++j) x.col(j) << Uniform(rng, 0.0, 6.28), Uniform(rng, -8.0, 8.0);
+  x.col(0) = task.goal;
+  Eigen::VectorXd v, v_back;
+  Eigen::MatrixXd p, p_back;
+  value.Evaluate(x, &v, &p);
+  back.Evaluate(x, &v_back, &p_back);
+  EXPECT_EQ(v, v_back);
+  EXPECT_EQ(p, p_back);
+  EXPECT_LT(std::abs(v[0]), 1e-15);
+  EXPECT_GT(v.tail(49).minCoeff(), 0.0);
+
+  HjbController controller(task, back);
+  for (int j = 0; j < 50; ++j) {
+    EXPECT_LT(std::abs(controller.Command(x.col(j))[0]), task.action_cost.u_max);
+  }
+  EXPECT_EQ(controller.Command(task.goal)[0], 0.0);
+  // A file of another kind, and a controller for another task, are refused.
+  std::filesystem::remove(path);
+  EXPECT_THROW(LoadValueFunction(path, &name), Error);
+  EXPECT_THROW(HjbController(ControlTaskByName("cartpole"), back), Error);
+}
+
+TEST(SolveHjb, RefusesBadOptions) {
+  const ControlTask task = ControlTaskByName("pendulum");
+  HjbOptions o = SmallHjb(1);
+  ValueFunction value = MakeTaskValueFunction(task, o);
+  o.rho_final = 3.0;  // above rho_start
+  EXPECT_THROW(SolveHjb(task, o, &value), Error);
+  o = SmallHjb(1);
+  o.samples = 1;
+  EXPECT_THROW(SolveHjb(task, o, &value), Error);
+  o = SmallHjb(1);
+  o.hidden = {0};
+  EXPECT_THROW(MakeTaskValueFunction(task, o), Error);
 }
 
 }  // namespace

@@ -95,6 +95,9 @@ struct ControlTask {
   Eigen::VectorXd tolerance;
   /// |x_i - goal_i| <= limit_i throughout, else the run fails (n; infinity: none).
   Eigen::VectorXd limit;
+  /// The state box [domain_low, domain_high] (n each, finite) a value function is
+  /// learned over (solvers/hjb.h).
+  Eigen::VectorXd domain_low, domain_high;
 
   /// n and m.
   int state_size() const { return static_cast<int>(goal.size()); }
@@ -178,6 +181,8 @@ inline ControlTask ControlTaskByName(const std::string& name) {
     t.action_cost = {ActionCost::Kind::kLogCosine, {}, u_max, 4.0 * u_max * u_max * r / kPi};
     t.tolerance = VectorOf({0.1, 0.5});
     t.limit = VectorOf({kInf, kInf});
+    t.domain_low = VectorOf({0.0, -8.0});  // |theta| <= pi, |theta'| <= 8 (lutter_facts.md (d))
+    t.domain_high = VectorOf({2.0 * kPi, 8.0});
   } else {
     // theta = 0 upright; only the cart is pushed; the track is |x| <= 0.5.
     t.start_low = VectorOf({-0.1, kPi - 0.1, 0.0, 0.0});
@@ -188,6 +193,8 @@ inline ControlTask ControlTaskByName(const std::string& name) {
     t.action_cost = {ActionCost::Kind::kQuadratic, VectorOf({0.01}), 0.0, 0.0};
     t.tolerance = VectorOf({0.5, 0.1, kInf, 0.5});
     t.limit = VectorOf({0.5, kInf, kInf, kInf});
+    t.domain_low = VectorOf({-0.5, -kPi, -3.0, -10.0});
+    t.domain_high = VectorOf({0.5, kPi, 3.0, 10.0});
   }
   return t;
 }

@@ -18,19 +18,35 @@
 // bounds by construction (lutter_facts.md (d)). a(x) and B(x) come from one Jet pass of
 // AnalyticModel::Dynamics at u = 0 with the actions seeded.
 //
+// SolveHjb learns V over the task's state domain (ControlTask::domain_low/high) with
+// the structured value network V = (z - z0)^T L L^T (z - z0) (ValueForm::kQuadratic;
+// z the state's features, sin/cos for periodic components, z0 the goal's), so that
+// V >= 0 and V(goal) = 0 hold by construction. The discount is annealed from large
+// (short-sighted, an easy equation) to the task's small one, rho_k geometric from
+// rho_start to rho_final over `stages` stages, each a residual minimisation from the
+// previous stage's parameters on fresh uniform states; `polish_stages` more at
+// rho_final divide the learning rate by 3 each. HjbController then acts by
+// u = u*(x, dV/dx(x)): one network pass per command, no replanning.
+//
 //   const ControlTask task = ControlTaskByName("pendulum");
-//   TaskHjb hjb(task, /*rho=*/1.0);
-//   TrainResult r = SolveResidual(hjb, states, options, &net);     // residual_solver.h
-//   Eigen::VectorXd u = hjb.Policy(x, p);                          // the feedback action
+//   ValueFunction value = SolveHjb(task, HjbOptions{});
+//   HjbController controller(task, value);                        // control.h
+//   std::vector<ControlRun> runs = EvaluateController(task, controller, {.starts = 300, .seed = 1});
 #pragma once
 
+#include <cstdint>
+#include <filesystem>
+#include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
 #include "diffdyn/physics/analytic_model.h"
+#include "diffdyn/models/model_file.h"
 #include "diffdyn/physics/control_task.h"
+#include "diffdyn/solvers/control.h"
 #include "diffdyn/solvers/residual_solver.h"
 
 namespace diffdyn {
@@ -61,5 +77,80 @@ class TaskHjb final : public FirstOrderEquation {
   std::vector<int> actuated_;
   double rho_ = 1.0;
 };
+
+/// Settings of SolveHjb (file comment). The defaults are those measured for the
+/// pendulum in paper_figures/hjb_pendulum/.
+struct HjbOptions {
+  /// Hidden widths and activation of the network of L (cFVI: tanh, 96 wide).
+  std::vector<int> hidden = {96, 96};
+  Activation activation = Activation::Tanh();
+  /// The homotopy: `stages` discounts geometric from rho_start to rho_final (1/s;
+  /// rho_final = -ln(0.65) / 5, the cFVI discount), then `polish_stages` at rho_final.
+  double rho_start = 5.0;
+  double rho_final = 0.0862;
+  int stages = 6;
+  int polish_stages = 2;
+  /// Uniform states drawn afresh over the task's domain for each stage.
+  int samples = 20000;
+  /// Adam per stage (epochs, learning rate, batch, held-out fraction, threads); its
+  /// seed is replaced per stage from `seed`.
+  TrainOptions train = DefaultTrain();
+  /// Seeds the network's initial parameters and the states.
+  std::uint64_t seed = 1;
+
+  /// Throws diffdyn::Error naming the bad setting.
+  void Validate() const;
+  static TrainOptions DefaultTrain();
+};
+
+/// What one stage of SolveHjb did.
+struct HjbStageReport {
+  int stage = 0;  // 0-based, over stages + polish_stages
+  int stages = 0;
+  double rho = 0.0;
+  double learning_rate = 0.0;
+  TrainResult result;
+  /// Wall time of the stage (s).
+  double seconds = 0.0;
+};
+
+/// The structured value network of the task, initialised from seed (file comment).
+ValueFunction MakeTaskValueFunction(const ControlTask& task, const HjbOptions& options);
+
+/// Learns the task's value function by the discount homotopy (file comment) from
+/// `value`'s parameters, in place; on_stage is called after every stage. Throws
+/// diffdyn::Error for bad options and diffdyn::NumericalError when a stage diverges.
+void SolveHjb(const ControlTask& task, const HjbOptions& options, ValueFunction* value,
+              const std::function<void(const HjbStageReport&)>& on_stage = {});
+
+/// The feedback policy u = u*(x, dV/dx(x)) of a learned value function (file comment).
+/// Copyable for the evaluator's threads; keeps references to task and value.
+class HjbController final : public Controller {
+ public:
+  /// Throws diffdyn::Error when value's state size is not the task's.
+  HjbController(const ControlTask& task, const ValueFunction& value);
+  void Reset(const Eigen::VectorXd& /*x0*/, std::uint64_t /*seed*/) override {}
+  Eigen::VectorXd Command(const Eigen::VectorXd& x) override;
+  std::unique_ptr<Controller> Clone() const override { return std::make_unique<HjbController>(task_, value_); }
+
+ private:
+  const ControlTask& task_;
+  const ValueFunction& value_;
+  TaskHjb hjb_;
+  ValueWorkspace ws_;
+  Eigen::VectorXd v_;
+  Eigen::MatrixXd p_;
+};
+
+/// Saves a task's value function as a model file of kind "value": architecture
+/// {"task", "form", "periodic", "goal", "epsilon", "mlp"} (model_file.h), atomically.
+void SaveValueFunction(const std::filesystem::path& path, const ValueFunction& value, const std::string& task,
+                       const nlohmann::json& provenance = nlohmann::json::object(),
+                       const nlohmann::json& metrics = nlohmann::json::object());
+
+/// Loads a model file of kind "value"; *task receives its task's name. Throws
+/// diffdyn::Error with one line naming the path.
+ValueFunction LoadValueFunction(const std::filesystem::path& path, std::string* task,
+                                ModelFile* contents = nullptr);
 
 }  // namespace diffdyn

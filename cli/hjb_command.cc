@@ -1,0 +1,125 @@
+// diffdyn hjb: a control task's value function by HJB residual minimisation with a
+// discount homotopy (solvers/hjb.h), saved as a model file of kind "value".
+//
+//   diffdyn hjb --system pendulum --out value.json [--stages 6] [--polish-stages 2]
+//               [--epochs 100] [--samples 20000] [--hidden 96] [--layers 2] [--lr 1e-3]
+//               [--batch 256] [--rho-start 5] [--rho-final 0.0862] [--threads 0] [--seed 0]
+//   diffdyn control --system pendulum --controller hjb --model value.json --starts 300 --seed 1
+//
+// Each stage prints its discount, held-out residual and wall time (unless --quiet);
+// the file is written once, at the end, atomically.
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <string>
+
+#include <fmt/core.h>
+
+#include "command.h"
+#include "diffdyn/physics/control_task.h"
+#include "diffdyn/solvers/hjb.h"
+
+namespace diffdyn::cli {
+namespace {
+
+struct HjbCommandOptions {
+  CommonOptions common;
+  std::string system = "pendulum";
+  std::string out;
+  HjbOptions hjb;
+  int hidden = 96;
+  int layers = 2;
+};
+
+void RunHjb(HjbCommandOptions o) {
+  // Validate everything before the work starts.
+  const ControlTask task = ControlTaskByName(o.system);
+  o.hjb.hidden.assign(static_cast<std::size_t>(o.layers), o.hidden);
+  o.hjb.seed = o.common.seed;
+  o.hjb.train.seed = o.common.seed;
+  ValueFunction value = MakeTaskValueFunction(task, o.hjb);
+  const auto start = std::chrono::steady_clock::now();
+  double residual = 0.0;
+  nlohmann::json stages = nlohmann::json::array();
+  SolveHjb(task, o.hjb, &value, [&](const HjbStageReport& r) {
+    residual = r.result.final_val_loss;
+    stages.push_back({{"rho", r.rho}, {"learning_rate", r.learning_rate}, {"epochs", r.result.epochs.size()},
+                      {"residual", residual}, {"seconds", r.seconds}});
+    if (!o.common.quiet) {
+      fmt::print(stderr, "hjb: stage {}/{}: rho {:.4g}, lr {:.2g}, mean squared residual {:.4g} (held out), {:.1f} s\n",
+                 r.stage + 1, r.stages, r.rho, r.learning_rate, residual, r.seconds);
+    }
+  });
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const nlohmann::json provenance = {{"command", "diffdyn hjb"},         {"system", o.system},
+                                     {"seed", o.common.seed},           {"samples", o.hjb.samples},
+                                     {"epochs", o.hjb.train.epochs},    {"lr", o.hjb.train.learning_rate},
+                                     {"batch", o.hjb.train.batch_size}, {"rho_start", o.hjb.rho_start},
+                                     {"rho_final", o.hjb.rho_final},    {"stages", stages}};
+  SaveValueFunction(o.out, value, o.system, provenance, {{"final_residual", residual}, {"seconds", seconds}});
+  const int total = o.hjb.stages + o.hjb.polish_stages;
+  if (o.common.json) {
+    PrintJson({{"model_path", o.out},
+               {"stages", total},
+               {"rho_final", o.hjb.rho_final},
+               {"seconds", seconds},
+               {"final_residual", residual},
+               {"system", o.system},
+               {"parameters", value.net().num_parameters()}});
+    return;
+  }
+  fmt::print("value function of the {} task ({} parameters): {} stages, rho {:.4g} -> {:.4g}, "
+             "mean squared HJB residual {:.4g} (held out), {:.1f} s\n",
+             o.system, value.net().num_parameters(), total, o.hjb.rho_start, o.hjb.rho_final, residual, seconds);
+  fmt::print("saved {}\n", o.out);
+}
+
+}  // namespace
+
+void RegisterHjbCommand(CLI::App& app) {
+  auto o = std::make_shared<HjbCommandOptions>();
+  CLI::App* command = app.add_subcommand(
+      "hjb", "Learn a control task's value function (HJB residual, discount homotopy) as a feedback policy");
+  AddCommonOptions(command, o->common);
+  command->add_option("--system", o->system, "Control task: pendulum or cartpole")->capture_default_str();
+  command->add_option("--out", o->out, "Value-function file to write (kind value)")
+      ->check(OutputPath())
+      ->required();
+  command->add_option("--stages", o->hjb.stages, "Homotopy stages, rho geometric from --rho-start to --rho-final")
+      ->check(Bounded(1, 1000))
+      ->capture_default_str();
+  command->add_option("--polish-stages", o->hjb.polish_stages,
+                      "Stages at --rho-final after the homotopy, the learning rate divided by 3 each")
+      ->check(Bounded(0, 1000))
+      ->capture_default_str();
+  command->add_option("--rho-start", o->hjb.rho_start, "First discount (1/s)")
+      ->check(Bounded(1e-6, 1e6))
+      ->capture_default_str();
+  command->add_option("--rho-final", o->hjb.rho_final, "Last discount (1/s), at most --rho-start")
+      ->check(Bounded(1e-6, 1e6))
+      ->capture_default_str();
+  command->add_option("--samples", o->hjb.samples, "Uniform states over the task's domain, drawn per stage")
+      ->check(Bounded(2, 1e7))
+      ->capture_default_str();
+  command->add_option("--epochs", o->hjb.train.epochs, "Adam epochs per stage")
+      ->check(Bounded(1, 1e6))
+      ->capture_default_str();
+  command->add_option("--lr", o->hjb.train.learning_rate, "Adam learning rate of the homotopy stages")
+      ->check(Bounded(1e-12, 10))
+      ->capture_default_str();
+  command->add_option("--batch", o->hjb.train.batch_size, "Mini-batch size")
+      ->check(Bounded(1, 1e7))
+      ->capture_default_str();
+  command->add_option("--hidden", o->hidden, "Width of the hidden layers (tanh)")
+      ->check(Bounded(1, 4096))
+      ->capture_default_str();
+  command->add_option("--layers", o->layers, "Number of hidden layers")
+      ->check(Bounded(1, 16))
+      ->capture_default_str();
+  command->add_option("--threads", o->hjb.train.threads, "Threads (0: all cores; results do not depend on it)")
+      ->check(Bounded(0, 256))
+      ->capture_default_str();
+  command->callback([o] { RunHjb(*o); });
+}
+
+}  // namespace diffdyn::cli
