@@ -127,8 +127,9 @@ void RunControl(const ControlCommandOptions& o) {
                   "--controller hjb needs --model, a value-function file written by `diffdyn hjb`");
     std::string value_task;
     value = LoadValueFunction(o.model, &value_task);
-    DIFFDYN_CHECK(value_task == o.system, o.model.substr(0, 200), ": a value function of the ",
-                  value_task.substr(0, 60), " task, not of --system ", o.system);
+    DIFFDYN_CHECK(value_task == o.system && value.state_size() == task.state_size(), o.model.substr(0, 200),
+                  ": a value function of the ", value_task.substr(0, 60), " task over ", value.state_size(),
+                  " states, not of --system ", o.system);
     owned = std::make_unique<HjbController>(task, value);
     model_kind = "value";
   } else if (o.controller == "lqr" || o.controller == "shooting") {

@@ -2,12 +2,15 @@
 // discount homotopy (solvers/hjb.h), saved as a model file of kind "value".
 //
 //   diffdyn hjb --system pendulum --out value.json [--stages 6] [--polish-stages 2]
-//               [--epochs 100] [--samples 20000] [--hidden 96] [--layers 2] [--lr 1e-3]
+//               [--epochs 40] [--samples 51200] [--hidden 96] [--layers 2] [--lr 1e-3]
 //               [--batch 256] [--rho-start 5] [--rho-final 0.0862] [--threads 0] [--seed 0]
+//               [--candidates 1] [--validation-starts 40]
 //   diffdyn control --system pendulum --controller hjb --model value.json --starts 300 --seed 1
 //
-// Each stage prints its discount, held-out residual and wall time (unless --quiet);
-// the file is written once, at the end, atomically.
+// Each stage prints its discount, held-out residual and wall time (unless --quiet).
+// With --candidates K, K value functions are trained from seeds S .. S + K - 1 and the
+// one whose policy costs least from --validation-starts validation starts is kept
+// (LearnTaskValue). The file is written once, at the end, atomically.
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -37,25 +40,41 @@ void RunHjb(HjbCommandOptions o) {
   o.hjb.hidden.assign(static_cast<std::size_t>(o.layers), o.hidden);
   o.hjb.seed = o.common.seed;
   o.hjb.train.seed = o.common.seed;
-  ValueFunction value = MakeTaskValueFunction(task, o.hjb);
+  o.hjb.Validate();
   const auto start = std::chrono::steady_clock::now();
+  nlohmann::json stages = nlohmann::json::array(), candidates = nlohmann::json::array();
+  int candidate = 0;
   double residual = 0.0;
-  nlohmann::json stages = nlohmann::json::array();
-  SolveHjb(task, o.hjb, &value, [&](const HjbStageReport& r) {
-    residual = r.result.final_val_loss;
-    stages.push_back({{"rho", r.rho}, {"learning_rate", r.learning_rate}, {"epochs", r.result.epochs.size()},
-                      {"residual", residual}, {"seconds", r.seconds}});
+  const auto on_stage = [&](const HjbStageReport& r) {
+    stages.push_back({{"candidate", candidate}, {"rho", r.rho}, {"learning_rate", r.learning_rate},
+                      {"epochs", r.result.epochs.size()}, {"residual", r.result.final_val_loss},
+                      {"seconds", r.seconds}});
     if (!o.common.quiet) {
-      fmt::print(stderr, "hjb: stage {}/{}: rho {:.4g}, lr {:.2g}, mean squared residual {:.4g} (held out), {:.1f} s\n",
-                 r.stage + 1, r.stages, r.rho, r.learning_rate, residual, r.seconds);
+      fmt::print(stderr, "hjb: {}stage {}/{}: rho {:.4g}, lr {:.2g}, mean squared residual {:.4g} (held out), "
+                 "{:.1f} s\n", o.hjb.candidates > 1 ? fmt::format("candidate {}/{}, ", candidate + 1,
+                                                                   o.hjb.candidates) : "",
+                 r.stage + 1, r.stages, r.rho, r.learning_rate, r.result.final_val_loss, r.seconds);
     }
-  });
+  };
+  double best_cost = 0.0;
+  const auto on_candidate = [&](const HjbCandidateReport& r) {
+    candidates.push_back({{"seed", r.seed}, {"successes", r.successes}, {"mean_cost", r.mean_cost},
+                          {"residual", r.residual}});
+    if (r.candidate == 0 || r.mean_cost < best_cost) best_cost = r.mean_cost, residual = r.residual;
+    if (!o.common.quiet && o.hjb.candidates > 1) {
+      fmt::print(stderr, "hjb: candidate {}/{} (seed {}): {}/{} validation starts swung up, mean cost {:.3f}\n",
+                 r.candidate + 1, o.hjb.candidates, r.seed, r.successes, o.hjb.validation_starts, r.mean_cost);
+    }
+    ++candidate;
+  };
+  const ValueFunction value = LearnTaskValue(task, o.hjb, on_stage, on_candidate);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const nlohmann::json provenance = {{"command", "diffdyn hjb"},         {"system", o.system},
                                      {"seed", o.common.seed},           {"samples", o.hjb.samples},
                                      {"epochs", o.hjb.train.epochs},    {"lr", o.hjb.train.learning_rate},
                                      {"batch", o.hjb.train.batch_size}, {"rho_start", o.hjb.rho_start},
-                                     {"rho_final", o.hjb.rho_final},    {"stages", stages}};
+                                     {"rho_final", o.hjb.rho_final},    {"stages", stages},
+                                     {"candidates", candidates}};
   SaveValueFunction(o.out, value, o.system, provenance, {{"final_residual", residual}, {"seconds", seconds}});
   const int total = o.hjb.stages + o.hjb.polish_stages;
   if (o.common.json) {
@@ -65,7 +84,8 @@ void RunHjb(HjbCommandOptions o) {
                {"seconds", seconds},
                {"final_residual", residual},
                {"system", o.system},
-               {"parameters", value.net().num_parameters()}});
+               {"parameters", value.net().num_parameters()},
+               {"candidates", candidates}});
     return;
   }
   fmt::print("value function of the {} task ({} parameters): {} stages, rho {:.4g} -> {:.4g}, "
@@ -115,6 +135,15 @@ void RegisterHjbCommand(CLI::App& app) {
       ->capture_default_str();
   command->add_option("--layers", o->layers, "Number of hidden layers")
       ->check(Bounded(1, 16))
+      ->capture_default_str();
+  command->add_option("--candidates", o->hjb.candidates,
+                      "Value functions trained from seeds S, S + 1, ...; the one whose policy costs least from "
+                      "the validation starts is kept")
+      ->check(Bounded(1, 1000))
+      ->capture_default_str();
+  command->add_option("--validation-starts", o->hjb.validation_starts,
+                      "Validation starts per candidate (seeded apart from control's starts)")
+      ->check(Bounded(1, 100000))
       ->capture_default_str();
   command->add_option("--threads", o->hjb.train.threads, "Threads (0: all cores; results do not depend on it)")
       ->check(Bounded(0, 256))

@@ -208,8 +208,6 @@ void Run(const FigureOptions& o) {
 int main(int argc, char** argv) {
   CLI::App app{"DDN Figure 4: HJB value function and feedback policy of the torque-limited pendulum"};
   FigureOptions o;
-  o.hjb.samples = 51200;
-  o.hjb.train.epochs = 40;
   bool plot = false;
   app.add_option("--out", o.out, "output folder")->capture_default_str();
   app.add_option("--starts", o.starts, "seeded start states")->check(CLI::Range(1, 100000))->capture_default_str();

@@ -1,7 +1,9 @@
 #include "diffdyn/solvers/hjb.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/random.h"
@@ -65,7 +67,7 @@ void TaskHjb::Evaluate(const Eigen::MatrixXd& x, const Eigen::VectorXd& v, const
 
 TrainOptions HjbOptions::DefaultTrain() {
   TrainOptions t;
-  t.epochs = 100;
+  t.epochs = 40;
   t.learning_rate = 1e-3;
   t.batch_size = 256;
   t.val_fraction = 0.05;
@@ -82,6 +84,9 @@ void HjbOptions::Validate() const {
   DIFFDYN_CHECK(polish_stages >= 0 && polish_stages <= 1000, "hjb: polish stages must be in [0, 1000], got ",
                 polish_stages);
   DIFFDYN_CHECK(samples >= 2 && samples <= 10000000, "hjb: samples must be in [2, 1e7], got ", samples);
+  DIFFDYN_CHECK(candidates >= 1 && candidates <= 1000, "hjb: candidates must be in [1, 1000], got ", candidates);
+  DIFFDYN_CHECK(validation_starts >= 1 && validation_starts <= 100000,
+                "hjb: validation starts must be in [1, 100000], got ", validation_starts);
 }
 
 ValueFunction MakeTaskValueFunction(const ControlTask& task, const HjbOptions& options) {
@@ -100,6 +105,20 @@ ValueFunction MakeTaskValueFunction(const ControlTask& task, const HjbOptions& o
   arch.sizes.push_back(ValueFunction::OutputsFor(ValueForm::kQuadratic, d));
   return ValueFunction::Quadratic(MakeInitializedMlp(arch, InitOptions::Ddn(), options.seed), task.goal, features);
 }
+
+namespace {
+
+// Fresh uniform states over the task's domain for stage k.
+Eigen::MatrixXd SampleStates(const ControlTask& task, const HjbOptions& options, std::uint64_t stage) {
+  Rng rng = TrajectoryRng(options.seed, stage);
+  Eigen::MatrixXd states(task.state_size(), options.samples);
+  for (int j = 0; j < options.samples; ++j) {
+    for (int i = 0; i < task.state_size(); ++i) states(i, j) = Uniform(rng, task.domain_low[i], task.domain_high[i]);
+  }
+  return states;
+}
+
+}  // namespace
 
 void SolveHjb(const ControlTask& task, const HjbOptions& options, ValueFunction* value,
               const std::function<void(const HjbStageReport&)>& on_stage) {
@@ -120,12 +139,7 @@ void SolveHjb(const ControlTask& task, const HjbOptions& options, ValueFunction*
     TrainOptions train = options.train;
     if (k >= options.stages) train.learning_rate /= std::pow(3.0, k - options.stages + 1);
     train.seed = SplitMix64Hash(options.seed * 1000 + static_cast<std::uint64_t>(k));
-    // Fresh uniform states over the domain.
-    Rng rng = TrajectoryRng(options.seed, static_cast<std::uint64_t>(k));
-    Eigen::MatrixXd states(n, options.samples);
-    for (int j = 0; j < options.samples; ++j) {
-      for (int i = 0; i < n; ++i) states(i, j) = Uniform(rng, task.domain_low[i], task.domain_high[i]);
-    }
+    const Eigen::MatrixXd states = SampleStates(task, options, static_cast<std::uint64_t>(k));
     HjbStageReport report{k, total, hjb.rho(), train.learning_rate, SolveResidual(hjb, states, train, value), 0.0};
     if (!std::isfinite(report.result.final_train_loss) || !value->net().parameters().allFinite()) {
       throw NumericalError(StrCat("hjb: stage ", k + 1, " (rho ", hjb.rho(), ") diverged: the residual is ",
@@ -134,6 +148,39 @@ void SolveHjb(const ControlTask& task, const HjbOptions& options, ValueFunction*
     report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (on_stage) on_stage(report);
   }
+}
+
+ValueFunction LearnTaskValue(const ControlTask& task, const HjbOptions& options,
+                             const std::function<void(const HjbStageReport&)>& on_stage,
+                             const std::function<void(const HjbCandidateReport&)>& on_candidate) {
+  options.Validate();
+  ValueFunction best;
+  double best_cost = std::numeric_limits<double>::infinity();
+  for (int c = 0; c < options.candidates; ++c) {
+    HjbOptions o = options;
+    o.seed = options.seed + static_cast<std::uint64_t>(c);
+    ValueFunction value = MakeTaskValueFunction(task, o);
+    HjbCandidateReport report{c, o.seed, 0, 0.0, 0.0};
+    SolveHjb(task, o, &value, [&](const HjbStageReport& r) {
+      report.residual = r.result.final_val_loss;
+      if (on_stage) on_stage(r);
+    });
+    // The policy's mean cost from the validation starts.
+    HjbController controller(task, value);
+    for (const ControlRun& run : EvaluateController(task, controller,
+                                                    {.starts = options.validation_starts,
+                                                     .seed = options.validation_seed,
+                                                     .threads = options.train.threads})) {
+      report.successes += run.success ? 1 : 0;
+      report.mean_cost += run.cost / options.validation_starts;
+    }
+    if (on_candidate) on_candidate(report);
+    if (c == 0 || report.mean_cost < best_cost) {
+      best_cost = report.mean_cost;
+      best = std::move(value);
+    }
+  }
+  return best;
 }
 
 HjbController::HjbController(const ControlTask& task, const ValueFunction& value)
@@ -156,6 +203,9 @@ MlpArchitecture ValueArchitectureFromJson(const nlohmann::json& j, ValueFunction
                     j.contains("periodic") && j["periodic"].is_array() && j.contains("epsilon") &&
                     j["epsilon"].is_number() && j.contains("mlp"),
                 "architecture must have task, form \"quadratic\", goal, periodic, epsilon and mlp");
+  const std::vector<std::string> tasks = ControlTaskNames();
+  DIFFDYN_CHECK(std::find(tasks.begin(), tasks.end(), j["task"].get<std::string>()) != tasks.end(),
+                "task must name a control task (pendulum or cartpole)");
   const MlpArchitecture arch = MlpArchitectureFromJson(j["mlp"]);
   DIFFDYN_CHECK(j["goal"].size() >= 1 && j["goal"].size() <= 64, "goal must have 1 to 64 values");
   Eigen::VectorXd goal(static_cast<Eigen::Index>(j["goal"].size()));

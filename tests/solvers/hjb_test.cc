@@ -160,6 +160,30 @@ TEST(SolveHjb, ValueFileRoundTripsAndTheControllerIsBounded) {
   EXPECT_THROW(HjbController(ControlTaskByName("cartpole"), back), Error);
 }
 
+// Two candidates from seeds 3 and 4: the one kept is the one with the lower validation
+// cost, and it is the same function SolveHjb gives from that seed.
+TEST(LearnTaskValue, KeepsTheCandidateWithTheLowestValidationCost) {
+  const ControlTask task = ControlTaskByName("pendulum");
+  HjbOptions o = SmallHjb(1);
+  o.candidates = 2;
+  o.validation_starts = 3;
+  std::vector<HjbCandidateReport> reports;
+  int stages = 0;
+  const ValueFunction kept =
+      LearnTaskValue(task, o, [&](const HjbStageReport&) { ++stages; },
+                     [&](const HjbCandidateReport& r) { reports.push_back(r); });
+  ASSERT_EQ(reports.size(), 2u);
+  EXPECT_EQ(stages, 6);
+  EXPECT_EQ(reports[0].seed, 3u);
+  EXPECT_EQ(reports[1].seed, 4u);
+  EXPECT_NE(reports[0].mean_cost, reports[1].mean_cost);
+  HjbOptions single = SmallHjb(1);
+  single.seed = reports[0].mean_cost <= reports[1].mean_cost ? 3 : 4;
+  ValueFunction expected = MakeTaskValueFunction(task, single);
+  SolveHjb(task, single, &expected);
+  EXPECT_EQ(kept.net().parameters(), expected.net().parameters());
+}
+
 TEST(SolveHjb, RefusesBadOptions) {
   const ControlTask task = ControlTaskByName("pendulum");
   HjbOptions o = SmallHjb(1);
@@ -172,6 +196,9 @@ TEST(SolveHjb, RefusesBadOptions) {
   o = SmallHjb(1);
   o.hidden = {0};
   EXPECT_THROW(MakeTaskValueFunction(task, o), Error);
+  o = SmallHjb(1);
+  o.candidates = 0;
+  EXPECT_THROW(LearnTaskValue(task, o), Error);
 }
 
 }  // namespace

@@ -91,12 +91,18 @@ struct HjbOptions {
   int stages = 6;
   int polish_stages = 2;
   /// Uniform states drawn afresh over the task's domain for each stage.
-  int samples = 20000;
+  int samples = 51200;
   /// Adam per stage (epochs, learning rate, batch, held-out fraction, threads); its
   /// seed is replaced per stage from `seed`.
   TrainOptions train = DefaultTrain();
   /// Seeds the network's initial parameters and the states.
-  std::uint64_t seed = 1;
+  std::uint64_t seed = 0;
+  /// LearnTaskValue: candidates trained from seeds seed, seed + 1, ...; the one whose
+  /// policy has the lowest mean cost from `validation_starts` starts of the task (drawn
+  /// with validation_seed, apart from any evaluation's starts) is kept.
+  int candidates = 1;
+  int validation_starts = 40;
+  std::uint64_t validation_seed = 1000003;
 
   /// Throws diffdyn::Error naming the bad setting.
   void Validate() const;
@@ -122,6 +128,23 @@ ValueFunction MakeTaskValueFunction(const ControlTask& task, const HjbOptions& o
 /// diffdyn::Error for bad options and diffdyn::NumericalError when a stage diverges.
 void SolveHjb(const ControlTask& task, const HjbOptions& options, ValueFunction* value,
               const std::function<void(const HjbStageReport&)>& on_stage = {});
+
+/// What one candidate of LearnTaskValue gave on the validation starts.
+struct HjbCandidateReport {
+  int candidate = 0;
+  std::uint64_t seed = 0;
+  int successes = 0;
+  double mean_cost = 0.0;
+  /// The last stage's held-out mean squared residual.
+  double residual = 0.0;
+};
+
+/// Trains options.candidates value functions by SolveHjb (seeds seed, seed + 1, ...)
+/// and returns the one whose policy has the lowest mean validation cost (HjbOptions);
+/// on_stage sees every stage of every candidate, on_candidate each candidate's score.
+ValueFunction LearnTaskValue(const ControlTask& task, const HjbOptions& options,
+                             const std::function<void(const HjbStageReport&)>& on_stage = {},
+                             const std::function<void(const HjbCandidateReport&)>& on_candidate = {});
 
 /// The feedback policy u = u*(x, dV/dx(x)) of a learned value function (file comment).
 /// Copyable for the evaluator's threads; keeps references to task and value.
