@@ -44,7 +44,6 @@ void RunHjb(HjbCommandOptions o) {
   const auto start = std::chrono::steady_clock::now();
   nlohmann::json stages = nlohmann::json::array(), candidates = nlohmann::json::array();
   int candidate = 0;
-  double residual = 0.0;
   const auto on_stage = [&](const HjbStageReport& r) {
     stages.push_back({{"candidate", candidate}, {"rho", r.rho}, {"learning_rate", r.learning_rate},
                       {"epochs", r.result.epochs.size()}, {"residual", r.result.final_val_loss},
@@ -56,18 +55,18 @@ void RunHjb(HjbCommandOptions o) {
                  r.stage + 1, r.stages, r.rho, r.learning_rate, r.result.final_val_loss, r.seconds);
     }
   };
-  double best_cost = 0.0;
   const auto on_candidate = [&](const HjbCandidateReport& r) {
     candidates.push_back({{"seed", r.seed}, {"successes", r.successes}, {"mean_cost", r.mean_cost},
                           {"residual", r.residual}});
-    if (r.candidate == 0 || r.mean_cost < best_cost) best_cost = r.mean_cost, residual = r.residual;
     if (!o.common.quiet && o.hjb.candidates > 1) {
       fmt::print(stderr, "hjb: candidate {}/{} (seed {}): {}/{} validation starts swung up, mean cost {:.3f}\n",
                  r.candidate + 1, o.hjb.candidates, r.seed, r.successes, o.hjb.validation_starts, r.mean_cost);
     }
     ++candidate;
   };
-  const ValueFunction value = LearnTaskValue(task, o.hjb, on_stage, on_candidate);
+  int kept = 0;
+  const ValueFunction value = LearnTaskValue(task, o.hjb, on_stage, on_candidate, &kept);
+  const double residual = candidates[static_cast<std::size_t>(kept)]["residual"].get<double>();
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const nlohmann::json provenance = {{"command", "diffdyn hjb"},         {"system", o.system},
                                      {"seed", o.common.seed},           {"samples", o.hjb.samples},

@@ -152,7 +152,7 @@ void SolveHjb(const ControlTask& task, const HjbOptions& options, ValueFunction*
 
 ValueFunction LearnTaskValue(const ControlTask& task, const HjbOptions& options,
                              const std::function<void(const HjbStageReport&)>& on_stage,
-                             const std::function<void(const HjbCandidateReport&)>& on_candidate) {
+                             const std::function<void(const HjbCandidateReport&)>& on_candidate, int* kept) {
   options.Validate();
   ValueFunction best;
   double best_cost = std::numeric_limits<double>::infinity();
@@ -178,6 +178,7 @@ ValueFunction LearnTaskValue(const ControlTask& task, const HjbOptions& options,
     if (c == 0 || report.mean_cost < best_cost) {
       best_cost = report.mean_cost;
       best = std::move(value);
+      if (kept) *kept = c;
     }
   }
   return best;

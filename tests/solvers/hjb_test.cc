@@ -168,10 +168,10 @@ TEST(LearnTaskValue, KeepsTheCandidateWithTheLowestValidationCost) {
   o.candidates = 2;
   o.validation_starts = 3;
   std::vector<HjbCandidateReport> reports;
-  int stages = 0;
+  int stages = 0, kept_index = -1;
   const ValueFunction kept =
       LearnTaskValue(task, o, [&](const HjbStageReport&) { ++stages; },
-                     [&](const HjbCandidateReport& r) { reports.push_back(r); });
+                     [&](const HjbCandidateReport& r) { reports.push_back(r); }, &kept_index);
   ASSERT_EQ(reports.size(), 2u);
   EXPECT_EQ(stages, 6);
   EXPECT_EQ(reports[0].seed, 3u);
@@ -179,6 +179,7 @@ TEST(LearnTaskValue, KeepsTheCandidateWithTheLowestValidationCost) {
   EXPECT_NE(reports[0].mean_cost, reports[1].mean_cost);
   HjbOptions single = SmallHjb(1);
   single.seed = reports[0].mean_cost <= reports[1].mean_cost ? 3 : 4;
+  EXPECT_EQ(kept_index, single.seed == 3 ? 0 : 1);
   ValueFunction expected = MakeTaskValueFunction(task, single);
   SolveHjb(task, single, &expected);
   EXPECT_EQ(kept.net().parameters(), expected.net().parameters());

@@ -141,10 +141,12 @@ struct HjbCandidateReport {
 
 /// Trains options.candidates value functions by SolveHjb (seeds seed, seed + 1, ...)
 /// and returns the one whose policy has the lowest mean validation cost (HjbOptions);
-/// on_stage sees every stage of every candidate, on_candidate each candidate's score.
+/// on_stage sees every stage of every candidate, on_candidate each candidate's score;
+/// *kept (if not null) receives the kept candidate's index.
 ValueFunction LearnTaskValue(const ControlTask& task, const HjbOptions& options,
                              const std::function<void(const HjbStageReport&)>& on_stage = {},
-                             const std::function<void(const HjbCandidateReport&)>& on_candidate = {});
+                             const std::function<void(const HjbCandidateReport&)>& on_candidate = {},
+                             int* kept = nullptr);
 
 /// The feedback policy u = u*(x, dV/dx(x)) of a learned value function (file comment).
 /// Copyable for the evaluator's threads; keeps references to task and value.
