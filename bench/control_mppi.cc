@@ -16,7 +16,8 @@ void BM_MppiPendulumCommand(benchmark::State& state) {
   const ControlTask task = ControlTaskByName("pendulum");
   const auto model = TaskModel(task, 0.04, 1);
   MppiController mppi(task, *model, {.samples = 1000, .horizon_seconds = 1.0, .threads = static_cast<int>(state.range(0))});
-  const Eigen::Vector2d x(0.3, 0.0);
+  Eigen::VectorXd x(2);
+  x << 0.3, 0.0;
   mppi.Reset(x, 1);
   for (auto _ : state) {
     Eigen::VectorXd u = mppi.Command(x);

@@ -21,7 +21,8 @@
 // with: by default, or when it names the task's system, the task's own analytic
 // model on steps of --dt seconds; otherwise anything LoadTransitionModel opens
 // (a learned model file, whose time step is its data's sample interval, or an
-// extended-physics file, integrated over --dt). The model's step must be a whole
+// extended-physics or DeLaN file, integrated over --dt; a DeLaN's action is the
+// torque of the task's actuated joints). The model's step must be a whole
 // multiple of the 8-ms control period (else exit 2).
 //
 // --out DIR writes DIR/starts.csv (start,x0_1..x0_n,success,cost,max_abs_u,seconds)
@@ -68,7 +69,8 @@ std::unique_ptr<TransitionModel> PlanningModel(const ControlCommandOptions& o, c
   DIFFDYN_CHECK(o.dt > 0 && o.dt <= 1.0, "--dt must be in (0, 1] s, got ", o.dt);
   PeriodsPerStep(o.dt, task.period, "--dt");
   if (o.model.empty() || o.model == o.system) return TaskModel(task, o.dt, 1);
-  return LoadTransitionModel(o.model, {.dt = o.dt, .method = Method::kRk4Classic, .substeps = 1});
+  return LoadTransitionModel(o.model, {.dt = o.dt, .method = Method::kRk4Classic, .substeps = 1,
+                                       .actuated = TaskActuatedJoints(task)});
 }
 
 // The value below which a fraction p of the sorted values lie (nearest rank).

@@ -77,12 +77,12 @@ std::unique_ptr<TransitionModel> LoadModel(const EvalCommandOptions& o, double d
   return model;
 }
 
-// Whether --model names a model file of kind "delan".
+// Whether --model names a model file of kind "delan" or "delan-friction".
 bool IsDelanFile(const std::string& spec) {
   std::error_code ec;
   if (!std::filesystem::is_regular_file(spec, ec)) return false;
   const nlohmann::json j = ReadJsonFile(spec);
-  return j.is_object() && j.contains("kind") && j["kind"] == "delan";
+  return j.is_object() && j.contains("kind") && j["kind"].is_string() && IsDelanKind(j["kind"].get<std::string>());
 }
 
 // The DeLaN as a dynamics model (forward dynamics through the continuous-time
@@ -120,6 +120,12 @@ void RunEvalDelan(const EvalCommandOptions& o) {
   const JointData test = data.format == "delan-characters" ? SplitForDelan(data, 0.2, 0).test
                                                           : WithAccelerations(data);
   std::map<std::string, double> scores = ScoreDelan(model, test, o.threads);
+  if (model.options().friction) {
+    for (int j = 0; j < model.dof(); ++j) {
+      scores[StrCat("viscous_", j + 1)] = model.viscous()[j];
+      scores[StrCat("coulomb_", j + 1)] = model.coulomb()[j];
+    }
+  }
   AddDelanRollouts(o, data.format == "delan-characters", &scores);
   for (const auto& [key, value] : scores) {
     if (!std::isfinite(value)) {
@@ -127,13 +133,13 @@ void RunEvalDelan(const EvalCommandOptions& o) {
     }
   }
   if (o.common.json) {
-    nlohmann::json summary = {{"model", "delan"}};
+    nlohmann::json summary = {{"model", model.options().kind()}};
     for (const auto& [key, value] : scores) summary[key] = value;
     summary["n_samples"] = test.size();
     PrintJson(summary);
     return;
   }
-  fmt::print("delan on {} ({} samples{}):\n", o.data, test.size(),
+  fmt::print("{} on {} ({} samples{}):\n", model.options().kind(), o.data, test.size(),
              data.format == "delan-characters" ? ", test characters e, q, v" : "");
   for (const auto& [key, value] : scores) {
     if (key != "n_samples") fmt::print("  {:<20} {:.4e}\n", key, value);

@@ -4,13 +4,19 @@
 // a seeded train/validation split, then saves it as a model file that records the
 // system description and the data's median sample interval. `--model delan` fits a
 // deep Lagrangian network (models/delan.h) to the torques of joint-space data
-// instead, with the DeLaN authors' defaults for every option not given.
+// instead, with the DeLaN authors' defaults for every option not given;
+// `--model delan-friction` adds a viscous and a Coulomb coefficient per joint, and
+// `--angle-features sincos` feeds the joints not --prismatic as (sin q, cos q).
 //
 //   diffdyn train --data pendulum.csv --model abs-node --epochs 200 --out pendulum.json
 //   diffdyn train --data ../shared/data/delan_characters --model delan --out delan.json
+//   diffdyn train --data cartpole.csv --model delan-friction --prismatic 1 --angle-features sincos
+//                 --out cartpole_delan.json
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <fmt/core.h>
 
@@ -42,6 +48,7 @@ struct TrainCommandOptions {
   int threads = 0;
   int patience = 0;
   std::string normalize = "auto";
+  double mass_epsilon = 0.01, diagonal_floor = 0.05;  // delan: H = L L^T + eps I, L_ii >= floor
   JointLayoutOptions layout;
   std::string out = "model.json";
 };
@@ -74,6 +81,24 @@ T OrDefault(const CLI::App& command, const char* name, T given, T fallback) {
   return command.count(name) > 0 ? given : fallback;
 }
 
+// A DeLaN's trunk sees q itself (the authors' PyTorch version) unless
+// --angle-features sincos is given: then every joint not --prismatic enters as
+// (sin q, cos q). 0-based joints.
+std::vector<int> DelanPeriodicJoints(const TrainCommandOptions& o, const CLI::App& command, int dof) {
+  if (command.count("--angle-features") == 0 || o.layout.angle_features != "sincos") return {};
+  const JointLayout layout = ResolveJointLayout(o.layout);
+  std::vector<int> periodic;
+  for (int j = 1; j <= dof; ++j) {
+    if (std::find(layout.prismatic.begin(), layout.prismatic.end(), j) == layout.prismatic.end()) {
+      periodic.push_back(j - 1);
+    }
+  }
+  for (int j : layout.prismatic) {
+    DIFFDYN_CHECK(j >= 1 && j <= dof, "--prismatic: joint ", j, " is not one of the ", dof, " joints of --data");
+  }
+  return periodic;
+}
+
 void RunTrainDelan(const TrainCommandOptions& o, const CLI::App& command) {
   const JointData data = ReadMeasured(o.data);
   const TrainOptions defaults = DelanTrainDefaults();
@@ -90,8 +115,14 @@ void RunTrainDelan(const TrainCommandOptions& o, const CLI::App& command) {
   DelanOptions arch;
   arch.dof = data.dof();
   arch.hidden = OrDefault(command, "--hidden", o.hidden, arch.hidden);
+  arch.friction = o.model == "delan-friction";
+  arch.epsilon = o.mass_epsilon;
+  arch.diagonal_floor = o.diagonal_floor;
+  arch.periodic = DelanPeriodicJoints(o, command, arch.dof);
   Delan model = Delan::Initialized(arch, o.common.seed);
-  const TrainResult result = TrainDelan(&model, split.train, split.test, options);
+  // --normalize on: every joint's torque weighs the same; auto and off: the authors' plain MSE.
+  const Eigen::VectorXd weights = o.normalize == "on" ? BalancedJointWeights(split.train) : Eigen::VectorXd();
+  const TrainResult result = TrainDelan(&model, split.train, split.test, options, {}, weights);
   if (!std::isfinite(result.final_train_loss) || !model.parameters().allFinite()) {
     throw NumericalError(StrCat("training diverged: the train loss is ", result.final_train_loss,
                                 " (try a smaller --lr); nothing written"));
@@ -100,15 +131,16 @@ void RunTrainDelan(const TrainCommandOptions& o, const CLI::App& command) {
       {"command", "diffdyn train"}, {"data", o.data},        {"seed", o.common.seed},
       {"epochs", options.epochs},   {"lr", options.learning_rate}, {"batch", options.batch_size},
       {"weight_decay", options.weight_decay}, {"amsgrad", options.amsgrad}, {"split", split.how},
-      {"n_train", result.n_train},  {"n_val", result.n_val}, {"epochs_run", result.epochs.size()}};
+      {"n_train", result.n_train},  {"n_val", result.n_val}, {"epochs_run", result.epochs.size()},
+      {"joint_weights", std::vector<double>(weights.data(), weights.data() + weights.size())}};
   SaveDelan(o.out, model, provenance, TrainMetrics(result));
   if (o.common.json) {
     nlohmann::json summary = TrainSummary(o, result, data.format, model.num_parameters());
-    summary["loss"] = "torque";
+    summary["loss"] = weights.size() > 0 ? "torque (joints weighted by 1 / variance)" : "torque";
     PrintJson(summary);
   } else {
-    fmt::print("delan ({} parameters, {} joints) trained on {} samples, validated on {} ({})\n",
-               model.num_parameters(), model.dof(), result.n_train, result.n_val, split.how);
+    fmt::print("{} ({} parameters, {} joints) trained on {} samples, validated on {} ({})\n",
+               arch.kind(), model.num_parameters(), model.dof(), result.n_train, result.n_val, split.how);
     fmt::print("final train loss {:.4e}, validation loss {:.4e} (torque MSE), {:.3f} s per epoch\n",
                result.final_train_loss, result.final_val_loss, result.seconds_per_epoch);
     fmt::print("saved {}\n", o.out);
@@ -117,7 +149,7 @@ void RunTrainDelan(const TrainCommandOptions& o, const CLI::App& command) {
 
 void RunTrain(const TrainCommandOptions& o, const CLI::App& command) {
   CheckDistinct(o.data, "--out", o.out);
-  if (o.model == "delan") return RunTrainDelan(o, command);
+  if (o.model == "delan" || o.model == "delan-friction") return RunTrainDelan(o, command);
   const Dataset dataset = ReadDataset(o.data, ResolveJointLayout(o.layout));
   const SampleIntervals dt = dataset.Intervals();
   LearnedModelConfig config;
@@ -204,9 +236,11 @@ void RegisterTrainCommand(CLI::App& app) {
       ->check(InputPath(true))
       ->required();
   command->add_option("--model", o->model,
-                      "Model: abs-nn, res-nn, abs-node, res-node (transition models) or delan "
-                      "(inverse dynamics from torques; defaults: the DeLaN authors' 10000 epochs, "
-                      "lr 5e-4, batch 512, hidden 64)");
+                      "Model: abs-nn, res-nn, abs-node, res-node (transition models), delan or "
+                      "delan-friction (inverse dynamics from torques, the latter with viscous and "
+                      "Coulomb friction per joint; defaults: the DeLaN authors' 10000 epochs, "
+                      "lr 5e-4, batch 512, hidden 64; the trunk sees q unless --angle-features "
+                      "sincos is given)");
   command->add_option("--solver", o->solver,
                       "NeuralODE solver: rk4 (3/8 rule), rk4-classic, euler, midpoint, dopri5 "
                       "(tolerance 1e-8)");
@@ -214,6 +248,15 @@ void RegisterTrainCommand(CLI::App& app) {
       ->check(Bounded(2, 10000));
   command->add_option("--hidden", o->hidden, "Width of both hidden layers")
       ->check(Bounded(1, 4096));
+  command->add_option("--mass-epsilon", o->mass_epsilon,
+                      "delan: eps of H = L L^T + eps I, a lower bound on H's eigenvalues (must be "
+                      "below the smallest true one: the cart-pole's pole has 0.0036 kg m^2)")
+      ->check(Bounded(1e-12, 1e6))
+      ->capture_default_str();
+  command->add_option("--diagonal-floor", o->diagonal_floor,
+                      "delan: L_ii = softplus(d_i - 1) + floor (floor^2 + eps bounds H's diagonal from below)")
+      ->check(Bounded(0.0, 1e3))
+      ->capture_default_str();
   command->add_option("--loss", o->loss, "single (one step) or multi (4-step rollout, --gamma)");
   command->add_option("--epochs", o->epochs, "Training epochs")
       ->check(Bounded(1, 1e6));
@@ -232,7 +275,8 @@ void RegisterTrainCommand(CLI::App& app) {
       ->check(Bounded(0, 1e6));
   command->add_option("--normalize", o->normalize,
                       "Scale the network's inputs and outputs to unit size from the training data: "
-                      "auto = on except for pushing CSVs (the paper's models), on, off")
+                      "auto = on except for pushing CSVs (the paper's models), on, off; delan: on weighs "
+                      "each joint's torque error by 1 / its variance, auto = off (the authors' loss)")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->capture_default_str();
   AddJointLayoutOptions(command, o->layout);

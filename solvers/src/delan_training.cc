@@ -13,19 +13,23 @@ namespace {
 // The characters the DeLaN authors hold out.
 bool IsTestCharacter(const std::string& label) { return label == "e" || label == "q" || label == "v"; }
 
-// (1/N) sum_samples sum_rows (a - b)^2 and the same over the total variance of b.
+// (1/N) sum_samples sum_rows (a - b)^2 and, where b varies, the same over its total variance.
 void AddScore(const std::string& key, const Eigen::MatrixXd& predicted, const Eigen::MatrixXd& truth,
               std::map<std::string, double>* scores) {
+  (*scores)[key + "_mse"] = (predicted - truth).squaredNorm() / static_cast<double>(truth.cols());
+  const double nmse = NormalizedMse(predicted, truth);
+  if (std::isfinite(nmse)) (*scores)[key + "_nmse"] = nmse;
+}
+
+}  // namespace
+
+double NormalizedMse(const Eigen::MatrixXd& predicted, const Eigen::MatrixXd& truth) {
   const double n = static_cast<double>(truth.cols());
   const double mse = (predicted - truth).squaredNorm() / n;
   const Eigen::VectorXd mean = truth.rowwise().mean();
   const double variance = (truth.colwise() - mean).squaredNorm() / n;
-  (*scores)[key + "_mse"] = mse;
-  (*scores)[key + "_nmse"] = variance > 0 ? mse / variance : std::numeric_limits<double>::quiet_NaN();
-  if (!(variance > 0)) scores->erase(key + "_nmse");
+  return variance > 0 ? mse / variance : std::numeric_limits<double>::quiet_NaN();
 }
-
-}  // namespace
 
 JointData WithAccelerations(const JointData& data) {
   if (data.qdd.cols() == data.size() && data.qdd.rows() == data.dof()) return data;
@@ -97,9 +101,23 @@ TrainOptions DelanTrainDefaults() {
   return o;
 }
 
+Eigen::VectorXd BalancedJointWeights(const JointData& train) {
+  const Eigen::VectorXd mean = train.tau.rowwise().mean();
+  const Eigen::VectorXd var = (train.tau.colwise() - mean).rowwise().squaredNorm() / std::max(1, train.size());
+  double largest = 0.0;
+  for (Eigen::Index j = 0; j < var.size(); ++j) {
+    if (var[j] > 0) largest = std::max(largest, 1.0 / var[j]);
+  }
+  DIFFDYN_CHECK(largest > 0 && std::isfinite(largest), train.path, ": no joint's torque varies");
+  Eigen::VectorXd w(var.size());
+  for (Eigen::Index j = 0; j < var.size(); ++j) w[j] = var[j] > 0 ? 1.0 / var[j] : largest;
+  return w;
+}
+
 TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& val,
                        const TrainOptions& options,
-                       const std::function<void(const EpochReport&)>& on_epoch) {
+                       const std::function<void(const EpochReport&)>& on_epoch,
+                       const Eigen::VectorXd& joint_weights) {
   for (const JointData* d : {&train, &val}) {
     if (d->size() == 0 && d == &val) continue;
     DIFFDYN_CHECK(d->dof() == model->dof(), d->path, ": ", d->dof(), " joints, the DeLaN has ",
@@ -112,10 +130,13 @@ TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& va
   DelanWorkspace ws, val_ws;
   ws.mlp = MlpWorkspace(model->network().architecture(), batch, options.chunk_size, true);
   Eigen::MatrixXd q(n, batch), qd(n, batch), qdd(n, batch), tau(n, batch);
+  // FitMinibatches updates theta; each loss evaluation first hands it to the model.
+  Eigen::VectorXd theta = model->parameters();
   MinibatchProblem problem;
   problem.n_train = train.size();
   problem.n_val = val.size();
   problem.batch_loss = [&](std::span<const int> positions, Eigen::VectorXd* grad) {
+    model->SetParameters(theta);
     const int b = static_cast<int>(positions.size());
     for (Eigen::MatrixXd* m : {&q, &qd, &qdd, &tau}) m->resize(n, b);  // no-op unless b changes
     for (int i = 0; i < b; ++i) {
@@ -124,12 +145,15 @@ TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& va
       qdd.col(i) = train.qdd.col(positions[i]);
       tau.col(i) = train.tau.col(positions[i]);
     }
-    return model->TorqueLoss(q, qd, qdd, tau, grad, &ws, options.threads);
+    return model->TorqueLoss(q, qd, qdd, tau, grad, &ws, options.threads, joint_weights);
   };
   problem.validation_loss = [&] {
-    return model->TorqueLoss(val.q, val.qd, val.qdd, val.tau, nullptr, &val_ws, options.threads);
+    model->SetParameters(theta);
+    return model->TorqueLoss(val.q, val.qd, val.qdd, val.tau, nullptr, &val_ws, options.threads, joint_weights);
   };
-  return FitMinibatches(problem, options, &model->mutable_parameters(), on_epoch);
+  const TrainResult result = FitMinibatches(problem, options, &theta, on_epoch);
+  model->SetParameters(theta);
+  return result;
 }
 
 std::map<std::string, double> ScoreDelan(const Delan& model, const JointData& data, int threads) {
@@ -149,16 +173,17 @@ std::map<std::string, double> ScoreDelan(const Delan& model, const JointData& da
   if (const auto* m = channel("m")) AddScore("inertial", p.inertial, *m, &scores);
   if (const auto* c = channel("c")) AddScore("coriolis", p.coriolis, *c, &scores);
   if (const auto* g = channel("g")) AddScore("gravity", p.gravity, *g, &scores);
-  if (const auto* f = channel("f")) AddScore("friction", Eigen::MatrixXd::Zero(f->rows(), f->cols()), *f, &scores);
+  if (const auto* f = channel("f")) AddScore("friction", p.friction, *f, &scores);
   if (const auto* k = channel("kinetic")) AddScore("kinetic", p.kinetic, *k, &scores);
   if (const auto* v = channel("potential")) {
     // V is identifiable up to a constant: match the means.
     const double offset = v->mean() - p.potential.mean();
     AddScore("potential", (p.potential.array() + offset).matrix(), *v, &scores);
   }
-  // Power: dE^/dt against the measured qd^T tau.
+  // Power: dE^/dt + qd^T f^ (what tau^ delivers) against the measured qd^T tau.
   const Eigen::RowVectorXd measured = (data.qd.array() * data.tau.array()).colwise().sum();
-  AddScore("power", p.power, measured, &scores);
+  const Eigen::RowVectorXd dissipated = (data.qd.array() * p.friction.array()).colwise().sum();
+  AddScore("power", p.power + dissipated, measured, &scores);
   scores["min_mass_eigenvalue"] = p.min_mass_eigenvalue.minCoeff();
   return scores;
 }

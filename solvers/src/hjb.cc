@@ -91,7 +91,7 @@ void HjbOptions::Validate() const {
 
 ValueFunction MakeTaskValueFunction(const ControlTask& task, const HjbOptions& options) {
   options.Validate();
-  ValueFeatures features;
+  InputFeatures features;
   for (int i = 0; i < task.state_size(); ++i) {
     if (task.periodic[static_cast<std::size_t>(i)]) features.periodic.push_back(i);
   }
@@ -214,7 +214,7 @@ MlpArchitecture ValueArchitectureFromJson(const nlohmann::json& j, ValueFunction
     DIFFDYN_CHECK(j["goal"][i].is_number(), "goal values must be numbers");
     goal[static_cast<Eigen::Index>(i)] = j["goal"][i].get<double>();
   }
-  ValueFeatures features;
+  InputFeatures features;
   for (const auto& i : j["periodic"]) {
     DIFFDYN_CHECK(i.is_number_integer() && i.get<long long>() >= 0 && i.get<long long>() < goal.size(),
                   "periodic entries must be state indices below ", goal.size());

@@ -152,4 +152,24 @@ Dataset CollectJointData(const JointTask& task, const JointCollectOptions& o) {
   return data;
 }
 
+void AddGroundTruth(const JointTask& task, Trajectory* traj) {
+  const auto plant = task.Plant();
+  const int n = plant->dof(), samples = static_cast<int>(traj->states.cols());
+  DIFFDYN_CHECK(traj->states.rows() == 2 * n && samples >= 2 &&
+                    traj->actions.rows() == static_cast<Eigen::Index>(task.actuated.size()) &&
+                    traj->actions.cols() == samples - 1,
+                task.name, ": a trajectory needs 2n x K+1 states and m x K actions, got ", traj->states.rows(),
+                " x ", samples, " and ", traj->actions.rows(), " x ", traj->actions.cols());
+  DIFFDYN_CHECK(plant->Delay<double>(plant->EffectParams()) == 0.0, task.name,
+                ": ground truth of a trajectory needs a plant without delay");
+  for (const char* name : {"tau", "qdd", "m", "c", "g", "f"}) traj->channels[name].resize(n, samples);
+  traj->channels["kinetic"].resize(1, samples);
+  traj->channels["potential"].resize(1, samples);
+  for (int k = 0; k < samples; ++k) {
+    const Eigen::VectorXd tau = task.FullTorque(traj->actions.col(std::min(k, samples - 2)), n);
+    traj->channels["tau"].col(k) = tau;
+    RecordSample(*plant, traj->states.col(k).head(n), traj->states.col(k).tail(n), tau, *traj, k);
+  }
+}
+
 }  // namespace diffdyn

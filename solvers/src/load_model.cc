@@ -32,7 +32,8 @@ std::unique_ptr<TransitionModel> Continuous(std::shared_ptr<const ExtendedModel>
   }
 }
 
-// A DeLaN's forward dynamics through the adapter: x = (q1..qn, qd1..qdn), u = tau1..taun.
+// A DeLaN's forward dynamics through the adapter: x = (q1..qn, qd1..qdn), u = the
+// torques of options.actuated (all joints when empty).
 std::unique_ptr<TransitionModel> DelanTransitionModel(Delan delan, const std::string& spec,
                                                      const LoadModelOptions& options) {
   DIFFDYN_CHECK(options.dt > 0, "--model ", spec, ": a continuous-time model (delan) needs a "
@@ -42,10 +43,22 @@ std::unique_ptr<TransitionModel> DelanTransitionModel(Delan delan, const std::st
   const int n = delan.dof();
   for (int j = 1; j <= n; ++j) system.state_names.push_back(StrCat("q", j));
   for (int j = 1; j <= n; ++j) system.state_names.push_back(StrCat("qd", j));
-  for (int j = 1; j <= n; ++j) system.action_names.push_back(StrCat("tau", j));
+  for (std::size_t k = 0; k < options.actuated.size(); ++k) {
+    DIFFDYN_CHECK(options.actuated[k] >= 0 && options.actuated[k] < n &&
+                      (k == 0 || options.actuated[k] > options.actuated[k - 1]),
+                  "--model ", spec, ": actuated joint ", options.actuated[k] + 1, " is not one of its ", n,
+                  " joints in increasing order");
+  }
+  if (options.actuated.empty()) {
+    for (int j = 1; j <= n; ++j) system.action_names.push_back(StrCat("tau", j));
+  } else {
+    for (int j : options.actuated) system.action_names.push_back(StrCat("tau", j + 1));
+  }
+  const std::string kind = delan.options().kind();
   return std::make_unique<ContinuousTransitionModel<DelanDynamics>>(
-      DelanDynamics{std::make_shared<const Delan>(std::move(delan))}, std::move(system), Eigen::VectorXd(),
-      ContinuousOptions{.method = options.method, .dt = options.dt, .substeps = options.substeps}, "delan");
+      DelanDynamics{std::make_shared<const Delan>(std::move(delan)), options.actuated}, std::move(system),
+      Eigen::VectorXd(), ContinuousOptions{.method = options.method, .dt = options.dt, .substeps = options.substeps},
+      kind);
 }
 
 }  // namespace
@@ -73,7 +86,7 @@ std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
   RegisterExtendedPhysicsKind();
   RegisterDelanKind();
   const ModelFile file = LoadModelFile(spec);
-  if (file.kind == "delan") return DelanTransitionModel(LoadDelan(spec), spec, options);
+  if (IsDelanKind(file.kind)) return DelanTransitionModel(LoadDelan(spec), spec, options);
   if (file.kind == "extended-physics") {
     auto extended = std::make_shared<const ExtendedModel>(LoadExtendedModel(spec));
     return Continuous(std::move(extended), spec, file.kind, options);
@@ -84,7 +97,7 @@ std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
   }
   throw Error(StrCat("--model ", spec, ": a model of kind '", file.kind,
                      "' is not a dynamics model (expected abs-nn, res-nn, abs-node, res-node, "
-                     "extended-physics or delan)"));
+                     "extended-physics, delan or delan-friction)"));
 }
 
 }  // namespace diffdyn

@@ -40,56 +40,6 @@ Eigen::MatrixXd LinearQuadraticHjb::SolutionMatrix() const {
   return SolveLqr(a_ - 0.5 * rho_ * Eigen::MatrixXd::Identity(n, n), b_, q_, r_).P;
 }
 
-Eigen::MatrixXd ValueFeatures::Encode(const Eigen::MatrixXd& x) const {
-  Eigen::MatrixXd z(size(static_cast<int>(x.rows())), x.cols());
-  Eigen::Index row = 0;
-  std::size_t next = 0;
-  for (Eigen::Index i = 0; i < x.rows(); ++i) {
-    if (next < periodic.size() && periodic[next] == i) {
-      z.row(row++) = x.row(i).array().sin().matrix();
-      z.row(row++) = x.row(i).array().cos().matrix();
-      ++next;
-    } else {
-      z.row(row++) = x.row(i);
-    }
-  }
-  return z;
-}
-
-Eigen::MatrixXd ValueFeatures::PullBack(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dvdz) const {
-  Eigen::MatrixXd p(x.rows(), x.cols());
-  Eigen::Index row = 0;
-  std::size_t next = 0;
-  for (Eigen::Index i = 0; i < x.rows(); ++i) {
-    if (next < periodic.size() && periodic[next] == i) {
-      // d sin / dx = cos, d cos / dx = -sin.
-      p.row(i) = dvdz.row(row).cwiseProduct(x.row(i).array().cos().matrix()) -
-                 dvdz.row(row + 1).cwiseProduct(x.row(i).array().sin().matrix());
-      row += 2;
-      ++next;
-    } else {
-      p.row(i) = dvdz.row(row++);
-    }
-  }
-  return p;
-}
-
-Eigen::MatrixXd ValueFeatures::PushForward(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dldp) const {
-  Eigen::MatrixXd g(size(static_cast<int>(x.rows())), x.cols());
-  Eigen::Index row = 0;
-  std::size_t next = 0;
-  for (Eigen::Index i = 0; i < x.rows(); ++i) {
-    if (next < periodic.size() && periodic[next] == i) {
-      g.row(row++) = dldp.row(i).cwiseProduct(x.row(i).array().cos().matrix());
-      g.row(row++) = -dldp.row(i).cwiseProduct(x.row(i).array().sin().matrix());
-      ++next;
-    } else {
-      g.row(row++) = dldp.row(i);
-    }
-  }
-  return g;
-}
-
 namespace {
 
 // The quadratic form's small matrices live on the stack: at most this many features.
@@ -140,7 +90,7 @@ struct QuadraticSample {
 
 }  // namespace
 
-ValueFunction::ValueFunction(Mlp<double> net, int n, ValueFeatures features, ValueForm form, Eigen::VectorXd goal,
+ValueFunction::ValueFunction(Mlp<double> net, int n, InputFeatures features, ValueForm form, Eigen::VectorXd goal,
                              double epsilon)
     : net_(std::move(net)), n_(n), features_(std::move(features)), form_(form), goal_(std::move(goal)),
       epsilon_(epsilon) {
@@ -163,11 +113,11 @@ ValueFunction::ValueFunction(Mlp<double> net, int n, ValueFeatures features, Val
   }
 }
 
-ValueFunction ValueFunction::Direct(Mlp<double> net, int n, ValueFeatures features) {
+ValueFunction ValueFunction::Direct(Mlp<double> net, int n, InputFeatures features) {
   return ValueFunction(std::move(net), n, std::move(features), ValueForm::kDirect, Eigen::VectorXd(), 1e-3);
 }
 
-ValueFunction ValueFunction::Quadratic(Mlp<double> net, const Eigen::VectorXd& goal, ValueFeatures features,
+ValueFunction ValueFunction::Quadratic(Mlp<double> net, const Eigen::VectorXd& goal, InputFeatures features,
                                        double epsilon) {
   const int n = static_cast<int>(goal.size());
   return ValueFunction(std::move(net), n, std::move(features), ValueForm::kQuadratic, goal, epsilon);

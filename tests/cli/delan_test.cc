@@ -1,5 +1,7 @@
 // diffdyn train --model delan and eval of the model file: the authors' split, the
-// component keys, the rollout keys, and one-line errors for data that does not fit.
+// component keys, the rollout keys, and one-line errors for data that does not fit;
+// delan-friction on the cart-pole with the pole as (sin, cos), and MPPI planning
+// with the learned model through the task's actuated joint.
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -103,6 +105,38 @@ TEST(DelanCli, EstimatesAccelerationsWhenTheDataHasNone) {
                                  "--quiet --json --out " + model));
   EXPECT_GT(t.at("n_train").get<int>(), 0);
   EXPECT_TRUE(std::isfinite(t.at("final_val_loss").get<double>()));
+}
+
+// A friction DeLaN on fully actuated cart-pole data: friction keys, learned
+// coefficients >= 0, a periodic pole in the file; MPPI plans with it on the task
+// (one actuated joint of two); an unknown --prismatic joint is refused.
+TEST(DelanCli, FrictionModelOnTheCartpoleTrainsEvaluatesAndControls) {
+  const std::string data = TempPath("delan_cartpole_all.csv"), model = TempPath("delan_cartpole.json");
+  Json(RunDiffdyn("collect --system cartpole --actuated all --trajectories 6 --seconds 2 --seed 3 --quiet "
+                  "--json --out " + data));
+  const auto t = Json(RunDiffdyn("train --data " + data + " --model delan-friction --prismatic 1 "
+                                 "--angle-features sincos --epochs 40 --hidden 16 --seed 1 --quiet --json --out " +
+                                 model));
+  EXPECT_EQ(t.at("model").get<std::string>(), "delan-friction");
+  std::ifstream file(model);
+  const nlohmann::json j = nlohmann::json::parse(file);
+  EXPECT_EQ(j.at("kind").get<std::string>(), "delan-friction");
+  EXPECT_EQ(j.at("architecture").at("periodic"), nlohmann::json::array({1}));
+  const auto e = Json(RunDiffdyn("eval --model " + model + " --data " + data + " --json"));
+  EXPECT_EQ(e.at("model").get<std::string>(), "delan-friction");
+  for (const char* key : {"friction_nmse", "kinetic_nmse", "potential_nmse", "power_nmse", "viscous_1",
+                          "viscous_2", "coulomb_1", "coulomb_2", "single_step_loss"}) {
+    ASSERT_TRUE(e.contains(key)) << key;
+    EXPECT_GE(e.at(key).get<double>(), 0.0) << key;
+  }
+  const auto c = Json(RunDiffdyn("control --system cartpole --controller mppi --model " + model +
+                                 " --starts 1 --samples 16 --horizon 0.2 --seed 1 --json"));
+  EXPECT_EQ(c.at("starts").get<int>(), 1);
+  const auto r = RunDiffdyn("train --data " + data + " --model delan --prismatic 3 --angle-features sincos "
+                            "--epochs 1 --quiet --out " + TempPath("delan_bad_prismatic.json"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_EQ(CountLines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("--prismatic"), std::string::npos) << r.err;
 }
 
 }  // namespace

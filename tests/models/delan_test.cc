@@ -1,6 +1,10 @@
 // DeLaN: structure (H, c, g from one network), the head's VJP against Jets, the
-// training gradient against finite differences, thread invariance.
+// training gradient against finite differences, thread invariance; periodic joints
+// and the friction head (kind delan-friction).
 #include "diffdyn/models/delan.h"
+
+#include <filesystem>
+#include <numbers>
 
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
@@ -10,8 +14,9 @@
 namespace diffdyn {
 namespace {
 
-DelanOptions SmallOptions(int dof) {
-  return {.dof = dof, .hidden = 12, .depth = 2, .activation = Activation::Softplus()};
+DelanOptions SmallOptions(int dof, std::vector<int> periodic = {}, bool friction = false) {
+  return {.dof = dof, .hidden = 12, .depth = 2, .activation = Activation::Softplus(), .periodic = periodic,
+          .friction = friction};
 }
 
 Eigen::MatrixXd RandomMatrix(int rows, int cols, Rng& rng, double scale = 1.0) {
@@ -21,11 +26,18 @@ Eigen::MatrixXd RandomMatrix(int rows, int cols, Rng& rng, double scale = 1.0) {
 }
 
 // A DeLaN whose output layer is not near zero (the default init makes the heads small).
-Delan RandomDelan(int dof, std::uint64_t seed) {
-  Delan model = Delan::Initialized(SmallOptions(dof), seed);
+Delan RandomDelan(const DelanOptions& options, std::uint64_t seed) {
+  Delan model = Delan::Initialized(options, seed);
   Rng rng(seed + 100);
-  model.mutable_parameters() = RandomMatrix(static_cast<int>(model.num_parameters()), 1, rng, 0.5);
+  model.SetParameters(RandomMatrix(static_cast<int>(model.num_parameters()), 1, rng, 0.5));
   return model;
+}
+Delan RandomDelan(int dof, std::uint64_t seed) { return RandomDelan(SmallOptions(dof), seed); }
+
+// The variants every structural test runs on: plain; joint 2 periodic; joint 1
+// periodic with the friction head.
+std::vector<DelanOptions> Variants(int dof) {
+  return {SmallOptions(dof), SmallOptions(dof, {1}), SmallOptions(dof, {0}, true)};
 }
 
 TEST(Delan, MassMatrixIsSymmetricPositiveDefinite) {
@@ -45,7 +57,8 @@ TEST(Delan, MassMatrixIsSymmetricPositiveDefinite) {
 TEST(Delan, CoriolisAndGravityMatchJetDerivativesOfMassMatrixAndPotential) {
   constexpr int kN = 3;
   using Jet = ceres::Jet<double, kN>;
-  const Delan model = RandomDelan(kN, 3);
+  for (const DelanOptions& options : Variants(kN)) {
+  const Delan model = RandomDelan(options, 3);
   Rng rng(4);
   for (int t = 0; t < 5; ++t) {
     const Eigen::VectorXd q = RandomMatrix(kN, 1, rng, 1.5), qd = RandomMatrix(kN, 1, rng, 2.0);
@@ -67,26 +80,89 @@ TEST(Delan, CoriolisAndGravityMatchJetDerivativesOfMassMatrixAndPotential) {
     EXPECT_LT((h.coriolis() - c_ref).norm(), 1e-12 * (1.0 + c_ref.norm()));
     for (int k = 0; k < kN; ++k) EXPECT_NEAR(h.gravity()[k], hj.potential().v[k], 1e-12);
   }
+  }
 }
 
 // tau(q, 0, 0) = g, tau(q, qd, 0) - g = c, tau(q, 0, qdd) - g = H qdd; forward
-// dynamics inverts inverse dynamics; and, with no friction, qd^T tau = dE/dt.
+// dynamics inverts inverse dynamics; and qd^T tau = dE/dt + qd^T f.
 TEST(Delan, DecompositionForwardDynamicsAndPowerAreConsistent) {
-  const Delan model = RandomDelan(2, 5);
+  for (const DelanOptions& options : Variants(2)) {
+  const Delan model = RandomDelan(options, 5);
   Rng rng(6);
   for (int t = 0; t < 10; ++t) {
     const Eigen::VectorXd q = RandomMatrix(2, 1, rng, 2), qd = RandomMatrix(2, 1, rng, 2),
                           qdd = RandomMatrix(2, 1, rng, 3), z = Eigen::VectorXd::Zero(2);
     const Eigen::VectorXd tau = model.InverseDynamics(q, qd, qdd);
     const DelanHead<double> h = model.Head<double>(q, qd, qdd);
-    const Eigen::VectorXd g = model.InverseDynamics(q, z, z);
+    const Eigen::VectorXd g = model.InverseDynamics(q, z, z), f = model.Friction(qd);
     EXPECT_LT((g - h.gravity()).norm(), 1e-13);
-    EXPECT_LT((model.InverseDynamics(q, qd, z) - g - h.coriolis()).norm(), 1e-12);
+    EXPECT_LT((model.InverseDynamics(q, qd, z) - g - h.coriolis() - f).norm(), 1e-12);
     EXPECT_LT((model.InverseDynamics(q, z, qdd) - g - h.MassMatrix() * qdd).norm(), 1e-12);
     EXPECT_LT((model.ForwardDynamics(q, qd, tau) - qdd).norm(), 1e-10 * (1 + qdd.norm()));
-    EXPECT_NEAR(qd.dot(tau), h.power(), 1e-12 * (1 + std::abs(h.power())));
+    EXPECT_NEAR(qd.dot(tau), h.power() + qd.dot(f), 1e-12 * (1 + std::abs(h.power())));
     EXPECT_NEAR(h.kinetic(), 0.5 * qd.dot(h.MassMatrix() * qd), 1e-12);
+    // The batched decomposition agrees with the single-sample one.
+    DelanWorkspace ws;
+    const DelanParts p = model.Decompose(q, qd, qdd, &ws, 1);
+    EXPECT_LT((p.torque.col(0) - tau).norm(), 1e-12 * (1 + tau.norm()));
+    EXPECT_LT((p.friction.col(0) - f).norm(), 1e-15);
   }
+  }
+}
+
+// f = viscous qd + coulomb tanh(qd / v_c) with coefficients softplus(w) >= 0; none without the head.
+TEST(Delan, FrictionHeadIsNonNegativeViscousPlusCoulomb) {
+  const Delan model = RandomDelan(SmallOptions(2, {}, true), 13);
+  const Eigen::VectorXd v = model.viscous(), c = model.coulomb();
+  EXPECT_TRUE((v.array() > 0).all() && (c.array() > 0).all());
+  Eigen::VectorXd qd(2);
+  qd << 0.7, -0.003;
+  for (int j = 0; j < 2; ++j) {
+    EXPECT_NEAR(model.Friction<double>(qd)[j], v[j] * qd[j] + c[j] * std::tanh(qd[j] / 0.01), 1e-15);
+  }
+  EXPECT_EQ(RandomDelan(2, 13).Friction<double>(qd).norm(), 0.0);
+  EXPECT_EQ(RandomDelan(SmallOptions(2, {}, true), 13).num_parameters(), RandomDelan(2, 13).num_parameters() + 4);
+}
+
+// A periodic joint: tau and the energies repeat after 2 pi; a plain one does not.
+TEST(Delan, PeriodicJointRepeatsAfterTwoPi) {
+  const Delan model = RandomDelan(SmallOptions(2, {1}), 14);
+  Rng rng(15);
+  const Eigen::VectorXd q = RandomMatrix(2, 1, rng, 2), qd = RandomMatrix(2, 1, rng, 2),
+                        qdd = RandomMatrix(2, 1, rng, 2);
+  Eigen::VectorXd turn2(2), turn1(2);
+  turn2 << 0.0, 2 * std::numbers::pi;
+  turn1 << 2 * std::numbers::pi, 0.0;
+  const Eigen::VectorXd tau = model.InverseDynamics(q, qd, qdd);
+  EXPECT_LT((model.InverseDynamics<double>(q + turn2, qd, qdd) - tau).norm(), 1e-11 * (1 + tau.norm()));
+  EXPECT_NEAR(model.Head<double>(q + turn2, qd, qdd).potential(), model.Head<double>(q, qd, qdd).potential(), 1e-12);
+  EXPECT_GT((model.InverseDynamics<double>(q + turn1, qd, qdd) - tau).norm(), 1e-6);
+}
+
+// A delan-friction file with a periodic joint loads back to the same model; a file
+// whose architecture lies about its input size is refused.
+TEST(Delan, FrictionModelFileRoundTrips) {
+  const Delan model = RandomDelan(SmallOptions(2, {1}, true), 16);
+  const auto path = std::filesystem::temp_directory_path() / "diffdyn_delan_friction_test.json";
+  SaveDelan(path, model);
+  ModelFile file;
+  const Delan back = LoadDelan(path, &file);
+  EXPECT_EQ(file.kind, "delan-friction");
+  EXPECT_TRUE(back.parameters() == model.parameters());
+  EXPECT_EQ(back.options().periodic, std::vector<int>{1});
+  Eigen::VectorXd q(2), qd(2);
+  q << 0.3, -1.0;
+  qd << -1.0, 2.0;
+  EXPECT_TRUE(back.InverseDynamics(q, qd, qd) == model.InverseDynamics(q, qd, qd));
+  nlohmann::json arch = DelanArchitectureToJson(model.options());
+  arch["periodic"] = nlohmann::json::array();
+  EXPECT_THROW(DelanArchitectureFromJson(arch, true), Error);  // mlp has 3 inputs, not 2
+  arch["periodic"] = {5};
+  EXPECT_THROW(DelanArchitectureFromJson(arch, true), Error);
+  arch = DelanArchitectureToJson(model.options());
+  arch.erase("coulomb_velocity");
+  EXPECT_THROW(DelanArchitectureFromJson(arch, true), Error);
+  std::filesystem::remove(path);
 }
 
 // The head's VJP (dL/dy, dL/dJ from dL/dtau) against forward-mode Jets seeded on y and J.
@@ -133,29 +209,50 @@ Batch RandomBatch(int n, int b, std::uint64_t seed) {
 // dL/dtheta by batched reverse mode (head VJP + Mlp::Backward through g'') against
 // central differences.
 TEST(Delan, TorqueLossGradientMatchesFiniteDifferences) {
-  Delan model = RandomDelan(2, 8);
+  for (const DelanOptions& options : Variants(2)) {
+  Delan model = RandomDelan(options, 8);
   const Batch d = RandomBatch(2, 37, 9);
   DelanWorkspace ws;
-  Eigen::VectorXd grad;
-  const double loss = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, &grad, &ws, 1);
+  Eigen::VectorXd grad, w;  // the friction variant weighs the joints
+  if (options.friction) {
+    w.resize(2);
+    w << 2.0, 0.5;
+  }
+  const double loss = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, &grad, &ws, 1, w);
   EXPECT_TRUE(std::isfinite(loss));
   ASSERT_EQ(grad.size(), model.num_parameters());
   const double h = 1e-6;
   double max_err = 0.0;
-  for (Eigen::Index p = 0; p < model.num_parameters(); p += 7) {
-    const double keep = model.parameters()[p];
-    model.mutable_parameters()[p] = keep + h;
-    const double up = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, nullptr, &ws, 1);
-    model.mutable_parameters()[p] = keep - h;
-    const double down = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, nullptr, &ws, 1);
-    model.mutable_parameters()[p] = keep;
+  const Eigen::VectorXd theta = model.parameters();
+  std::vector<Eigen::Index> checked;
+  for (Eigen::Index p = 0; p < model.num_parameters(); p += 7) checked.push_back(p);
+  for (int k = 0; k < options.num_friction_parameters(); ++k) checked.push_back(model.num_parameters() - 1 - k);
+  for (const Eigen::Index p : checked) {
+    Eigen::VectorXd moved = theta;
+    moved[p] = theta[p] + h;
+    model.SetParameters(moved);
+    const double up = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, nullptr, &ws, 1, w);
+    moved[p] = theta[p] - h;
+    model.SetParameters(moved);
+    const double down = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, nullptr, &ws, 1, w);
     max_err = std::max(max_err, std::abs((up - down) / (2 * h) - grad[p]) / (1.0 + std::abs(grad[p])));
   }
-  EXPECT_LT(max_err, 1e-6);
+  model.SetParameters(theta);
+  if (w.size() > 0) {  // the weighted loss itself
+    DelanWorkspace fresh;
+    double manual = 0.0;
+    for (int b = 0; b < 37; ++b) {
+      const Eigen::VectorXd e = model.InverseDynamics<double>(d.q.col(b), d.qd.col(b), d.qdd.col(b)) - d.tau.col(b);
+      manual += e.dot(w.cwiseProduct(e)) / 37.0;
+    }
+    EXPECT_NEAR(loss, manual, 1e-12 * manual);
+  }
+  EXPECT_LT(max_err, 1e-6) << "periodic " << options.periodic.size() << " friction " << options.friction;
+  }
 }
 
 TEST(Delan, LossIsTheSameAtAnyThreadCount) {
-  const Delan model = RandomDelan(2, 10);
+  const Delan model = RandomDelan(SmallOptions(2, {1}, true), 10);
   const Batch d = RandomBatch(2, 300, 11);
   DelanWorkspace one, two;
   one.mlp = MlpWorkspace(model.network().architecture(), 300, 64, true);

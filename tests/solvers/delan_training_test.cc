@@ -75,5 +75,24 @@ TEST(DelanTraining, RefusesDataOfAnotherSize) {
   EXPECT_THROW(ScoreDelan(model, split.test), Error);
 }
 
+// w_j = 1 / Var(tau_j); an unactuated joint (tau = 0) gets the largest other weight;
+// data without varying torque are refused.
+TEST(DelanTraining, BalancedJointWeights) {
+  JointData d;
+  d.path = "weights.csv";
+  d.t = Eigen::VectorXd::LinSpaced(4, 0.0, 0.3);
+  d.q = d.qd = Eigen::MatrixXd::Zero(3, 4);
+  d.tau = Eigen::MatrixXd::Zero(3, 4);
+  d.tau.row(0) << 1, -1, 1, -1;      // variance 1
+  d.tau.row(1) << 10, -10, 10, -10;  // variance 100
+  const Eigen::VectorXd w = BalancedJointWeights(d);
+  ASSERT_EQ(w.size(), 3);
+  EXPECT_DOUBLE_EQ(w[0], 1.0);
+  EXPECT_DOUBLE_EQ(w[1], 0.01);
+  EXPECT_DOUBLE_EQ(w[2], 1.0);
+  d.tau.setZero();
+  EXPECT_THROW(BalancedJointWeights(d), Error);
+}
+
 }  // namespace
 }  // namespace diffdyn

@@ -45,8 +45,8 @@ std::vector<ValueFunction> ValueFunctions(std::uint64_t seed) {
   };
   Eigen::VectorXd goal(2);
   goal << 0.3, -0.2;
-  return {ValueFunction::Direct(net(2, 1), 2), ValueFunction::Direct(net(3, 1), 2, ValueFeatures{{0}}),
-          ValueFunction::Quadratic(net(3, 6), goal, ValueFeatures{{0}}), ValueFunction::Quadratic(net(2, 3), goal)};
+  return {ValueFunction::Direct(net(2, 1), 2), ValueFunction::Direct(net(3, 1), 2, InputFeatures{{0}}),
+          ValueFunction::Quadratic(net(3, 6), goal, InputFeatures{{0}}), ValueFunction::Quadratic(net(2, 3), goal)};
 }
 
 TEST(LinearQuadraticHjb, QuadraticSolutionHasZeroResidual) {

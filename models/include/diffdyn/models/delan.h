@@ -13,7 +13,13 @@
 //   g     = dV/dq                                            (gravity, n)
 //   L_k   = dL/dq_k,   Ldot = sum_k qd_k L_k
 //   c     = Hdot qd - 1/2 [qd^T (dH/dq_k) qd]_k              (Coriolis, centrifugal)
-//   tau   = H qdd + c + g                                    (inverse dynamics)
+//   f     = softplus(w_v) * qd + softplus(w_c) * tanh(qd / v_c)   (friction, kind
+//           delan-friction: viscous and Coulomb coefficients >= 0 per joint)
+//   tau   = H qdd + c + g [+ f]                              (inverse dynamics)
+//
+// Joints listed in `periodic` enter the trunk as (sin q, cos q) (input_features.h),
+// so H and V are periodic in them and data that wind a joint over many turns stay
+// in the network's range; dy/dq = (dy/dz)(dz/dq) then feeds everything below.
 //
 // computed without forming H's derivatives: with a = L^T qd, b = L^T qdd and
 // e = Ldot^T qd,
@@ -29,6 +35,7 @@
 // or ceres::Jet), so a DeLaN can be linearised or integrated with Jets.
 //
 //   Delan model = Delan::Initialized({.dof = 2}, /*seed=*/0);
+//   Delan cartpole = Delan::Initialized({.dof = 2, .periodic = {1}, .friction = true}, 0);
 //   DelanWorkspace ws;
 //   double loss = model.TorqueLoss(q, qd, qdd, tau, &grad, &ws);   // n x B each
 //   Eigen::VectorXd tau1 = model.InverseDynamics(q0, qd0, qdd0);    // one sample
@@ -40,6 +47,7 @@
 #include <filesystem>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -51,6 +59,7 @@
 #include "diffdyn/autodiff_ode/spd_solve.h"
 #include "diffdyn/models/activations.h"
 #include "diffdyn/models/init.h"
+#include "diffdyn/models/input_features.h"
 #include "diffdyn/models/json_io.h"
 #include "diffdyn/models/mlp.h"
 #include "diffdyn/models/model_file.h"
@@ -74,12 +83,25 @@ struct DelanOptions {
   /// with shift 0 and 1.3e-3 with the DeLaN authors' later softplus(d + 2) + 0.1.
   double diagonal_shift = -1.0;
   double diagonal_floor = 0.05;
+  /// 0-based joints that enter the trunk as (sin q, cos q) (input_features.h).
+  std::vector<int> periodic{};
+  /// The friction head f(qd) (file comment): kind "delan-friction".
+  bool friction = false;
+  /// v_c of the smoothed sign tanh(qd / v_c) (m/s or rad/s; the coulomb effect's 0.01).
+  double coulomb_velocity = 0.01;
+
+  /// The model-file kind: "delan" or "delan-friction".
+  std::string kind() const { return friction ? "delan-friction" : "delan"; }
+  /// The trunk's input map q -> z.
+  InputFeatures features() const { return {periodic}; }
+  /// Parameters of the friction head after the network's: 2n (w_v, then w_c) or 0.
+  int num_friction_parameters() const { return friction ? 2 * dof : 0; }
 
   /// m = 1 + n(n+1)/2 network outputs: V, the n(n-1)/2 entries below L's diagonal, n diagonal inputs.
   int num_outputs() const { return 1 + dof * (dof + 1) / 2; }
   /// The trunk and heads as one Mlp architecture: [n, hidden x depth, m].
   MlpArchitecture NetworkArchitecture() const {
-    std::vector<int> sizes{dof};
+    std::vector<int> sizes{features().size(dof)};
     for (int l = 0; l < depth; ++l) sizes.push_back(hidden);
     sizes.push_back(num_outputs());
     return {sizes, std::vector<Activation>(depth, activation)};
@@ -94,6 +116,9 @@ struct DelanOptions {
     DIFFDYN_CHECK(std::isfinite(diagonal_shift) && diagonal_floor >= 0.0 && std::isfinite(diagonal_floor),
                   "DeLaN: diagonal shift must be finite and floor >= 0, got ", diagonal_shift, " and ",
                   diagonal_floor);
+    features().Validate(dof);
+    DIFFDYN_CHECK(coulomb_velocity > 0.0 && std::isfinite(coulomb_velocity),
+                  "DeLaN: coulomb_velocity must be positive, got ", coulomb_velocity);
   }
 };
 
@@ -228,46 +253,86 @@ class DelanHead {
 /// Buffers of the batched DeLaN paths (one per concurrent caller).
 struct DelanWorkspace {
   MlpWorkspace mlp;
-  Eigen::MatrixXd y, jac, ybar, jbar;
-  std::vector<DelanHead<double>> heads;  // one per chunk
+  Eigen::MatrixXd z, y, jac, ybar, jbar;     // network inputs, outputs, dy/dz and cotangents
+  Eigen::VectorXd net_grad;
+  std::vector<DelanHead<double>> heads;      // one per chunk
+  std::vector<Eigen::MatrixXd> jq, jq_bar;   // dy/dq and dL/d(dy/dq) of one sample, per chunk
+  std::vector<Eigen::VectorXd> friction_grad;  // per chunk (2n)
   std::vector<double> chunk_loss;
 };
 
 /// The DeLaN parts of a batch (n x B each, energies 1 x B).
 struct DelanParts {
-  Eigen::MatrixXd torque, inertial, coriolis, gravity;
+  Eigen::MatrixXd torque, inertial, coriolis, gravity, friction;
   Eigen::RowVectorXd kinetic, potential, power, min_mass_eigenvalue;
 };
 
 /// A deep Lagrangian network: one Mlp<double> (the trunk and the heads' linear
-/// outputs) plus the structure of delan.h. Parameters are the Mlp's flat theta.
+/// outputs), the structure of delan.h and, for kind delan-friction, 2n friction
+/// parameters. Parameters are theta = [the Mlp's flat theta, w_v (n), w_c (n)].
 class Delan {
  public:
   /// The DeLaN authors' initialisation: xavier-normal, hidden gain sqrt(2),
   /// output gain 0.125, bias 1e-4.
   static InitOptions DefaultInit() { return {InitScheme::kXavierNormal, std::sqrt(2.0), 0.125, 1e-4}; }
+  /// Initial w_v = w_c: softplus(-4.6) = 0.01.
+  static constexpr double kInitialFrictionRaw = -4.6;
 
-  /// A DeLaN with parameters drawn by DefaultInit from Rng(seed).
+  /// A DeLaN with parameters drawn by DefaultInit from Rng(seed) (friction at kInitialFrictionRaw).
   static Delan Initialized(const DelanOptions& options, std::uint64_t seed) {
     options.Validate();
-    return Delan(options, MakeInitializedMlp(options.NetworkArchitecture(), DefaultInit(), seed).parameters());
+    const Eigen::VectorXd net = MakeInitializedMlp(options.NetworkArchitecture(), DefaultInit(), seed).parameters();
+    Eigen::VectorXd theta(net.size() + options.num_friction_parameters());
+    theta << net, Eigen::VectorXd::Constant(options.num_friction_parameters(), kInitialFrictionRaw);
+    return Delan(options, std::move(theta));
   }
 
   Delan() = default;
   /// A DeLaN with flat parameters theta (size num_parameters()).
-  Delan(const DelanOptions& options, Eigen::VectorXd theta) : options_(options) {
+  Delan(const DelanOptions& options, const Eigen::VectorXd& theta) : options_(options) {
     options.Validate();
-    net_ = Mlp<double>(options.NetworkArchitecture(), std::move(theta));
+    const MlpArchitecture arch = options.NetworkArchitecture();
+    const Eigen::Index k = arch.num_parameters();
+    DIFFDYN_CHECK(theta.size() == k + options.num_friction_parameters(), "DeLaN: expected ",
+                  k + options.num_friction_parameters(), " parameters, got ", theta.size());
+    net_ = Mlp<double>(arch, theta.head(k));
+    friction_ = theta.tail(options.num_friction_parameters());
   }
 
   const DelanOptions& options() const { return options_; }
   int dof() const { return options_.dof; }
   const Mlp<double>& network() const { return net_; }
-  Eigen::Index num_parameters() const { return net_.num_parameters(); }
-  const Eigen::VectorXd& parameters() const { return net_.parameters(); }
-  Eigen::VectorXd& mutable_parameters() { return net_.mutable_parameters(); }
+  Eigen::Index num_parameters() const { return net_.num_parameters() + friction_.size(); }
+  /// theta = [network, w_v, w_c] (a copy).
+  Eigen::VectorXd parameters() const {
+    Eigen::VectorXd theta(num_parameters());
+    theta << net_.parameters(), friction_;
+    return theta;
+  }
+  /// Sets theta (size num_parameters()).
+  void SetParameters(const Eigen::VectorXd& theta) {
+    DIFFDYN_CHECK(theta.size() == num_parameters(), "DeLaN: expected ", num_parameters(), " parameters, got ",
+                  theta.size());
+    net_.mutable_parameters() = theta.head(net_.num_parameters());
+    friction_ = theta.tail(friction_.size());
+  }
 
-  /// tau = H(q) qdd + c(q, qd) + g(q) of one sample, on double or Jets.
+  /// Viscous and Coulomb coefficients softplus(w) (n each; zeros without friction head).
+  Eigen::VectorXd viscous() const { return FrictionCoefficients(0); }
+  Eigen::VectorXd coulomb() const { return FrictionCoefficients(1); }
+
+  /// f(qd) = viscous * qd + coulomb * tanh(qd / v_c) (n; zeros without friction head), on double or Jets.
+  template <typename S>
+  Eigen::Matrix<S, Eigen::Dynamic, 1> Friction(const Eigen::Matrix<S, Eigen::Dynamic, 1>& qd) const {
+    using std::tanh;
+    Eigen::Matrix<S, Eigen::Dynamic, 1> f = Eigen::Matrix<S, Eigen::Dynamic, 1>::Zero(dof());
+    if (!options_.friction) return f;
+    const Eigen::VectorXd v = viscous(), c = coulomb();
+    for (int j = 0; j < dof(); ++j) f[j] = S(v[j]) * qd[j] + S(c[j]) * tanh(qd[j] / S(options_.coulomb_velocity));
+    return f;
+  }
+
+  /// tau = H(q) qdd + c(q, qd) + g(q) + f(qd) of one sample, on double or Jets.
   template <typename S>
   Eigen::Matrix<S, Eigen::Dynamic, 1> InverseDynamics(const Eigen::Matrix<S, Eigen::Dynamic, 1>& q,
                                                       const Eigen::Matrix<S, Eigen::Dynamic, 1>& qd,
@@ -275,46 +340,55 @@ class Delan {
     DelanHead<S> head = Head(q, qd, qdd);
     Eigen::Matrix<S, Eigen::Dynamic, 1> tau(dof());
     head.Torque(tau);
-    return tau;
+    return tau + Friction(qd);
   }
 
-  /// qdd = H^-1 (tau - c - g) by a Cholesky solve (H is positive definite), on double or Jets.
+  /// qdd = H^-1 (tau - c - g - f) by a Cholesky solve (H is positive definite), on double or Jets.
   template <typename S>
   Eigen::Matrix<S, Eigen::Dynamic, 1> ForwardDynamics(const Eigen::Matrix<S, Eigen::Dynamic, 1>& q,
                                                       const Eigen::Matrix<S, Eigen::Dynamic, 1>& qd,
                                                       const Eigen::Matrix<S, Eigen::Dynamic, 1>& tau) const {
     using Vec = Eigen::Matrix<S, Eigen::Dynamic, 1>;
     DelanHead<S> head = Head(q, qd, Vec::Zero(dof()).eval());
-    const Vec rhs = tau - head.coriolis() - head.gravity();
+    const Vec rhs = tau - head.coriolis() - head.gravity() - Friction(qd);
     return SpdSolve<S>(head.MassMatrix(), rhs);
   }
 
-  /// The full per-sample head (L, H, c, g, energies) of one sample.
+  /// The full per-sample head (L, H, c, g, energies; no friction) of one sample.
   template <typename S>
   DelanHead<S> Head(const Eigen::Matrix<S, Eigen::Dynamic, 1>& q, const Eigen::Matrix<S, Eigen::Dynamic, 1>& qd,
                     const Eigen::Matrix<S, Eigen::Dynamic, 1>& qdd) const {
     DIFFDYN_CHECK(q.size() == dof() && qd.size() == dof() && qdd.size() == dof(), "DeLaN: expected ",
                   dof(), " joints, got q, qd, qdd of sizes ", q.size(), ", ", qd.size(), ", ", qdd.size());
+    const InputFeatures features = options_.features();
     Eigen::Matrix<S, Eigen::Dynamic, 1> y;
-    Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic> jac;
-    net_.ValueAndJacobian(q, &y, &jac);
+    Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic> jz, jq(options_.num_outputs(), dof());
+    net_.ValueAndJacobian(features.EncodeOne<S>(q), &y, &jz);
+    features.ChainJacobian<S>(q, jz, &jq);
     DelanHead<S> head(options_);
-    head.Forward(y, jac, qd, qdd);
+    head.Forward(y, jq, qd, qdd);
     return head;
   }
 
-  /// Training loss (1/B) sum_b |tau^_b - tau_b|^2 over the batch (q, qd, qdd, tau:
-  /// n x B) and, if grad is not null, dL/dtheta (resized). Chunks of
-  /// ws->mlp.chunk_size() samples on `threads` threads (<= 0: all cores), summed in
-  /// chunk order: the same result at any thread count.
+  /// Training loss (1/B) sum_b sum_j w_j (tau^_bj - tau_bj)^2 over the batch (q, qd,
+  /// qdd, tau: n x B; w = `joint_weights` (n), or ones when empty) and, if grad is
+  /// not null, dL/dtheta (resized). Chunks of ws->mlp.chunk_size() samples on
+  /// `threads` threads (<= 0: all cores), summed in chunk order: the same result at
+  /// any thread count.
   double TorqueLoss(const Eigen::MatrixXd& q, const Eigen::MatrixXd& qd, const Eigen::MatrixXd& qdd,
                     const Eigen::MatrixXd& tau, Eigen::VectorXd* grad, DelanWorkspace* ws,
-                    int threads = 0) const {
+                    int threads = 0, const Eigen::VectorXd& joint_weights = {}) const {
     const int batch = static_cast<int>(q.cols());
     CheckBatch(q, qd, qdd, batch);
     DIFFDYN_CHECK(tau.rows() == dof() && tau.cols() == batch, "DeLaN: tau must be ", dof(), " x ", batch);
-    net_.Forward(q, &ws->y, &ws->jac, &ws->mlp, threads);
-    const int n = dof(), chunk = ws->mlp.chunk_size(), chunks = NumChunks(batch, chunk);
+    DIFFDYN_CHECK(joint_weights.size() == 0 || joint_weights.size() == dof(), "DeLaN: ", dof(),
+                  " joint weights expected, got ", joint_weights.size());
+    const bool weighted = joint_weights.size() > 0;
+    const InputFeatures features = options_.features();
+    features.Encode(q, &ws->z);
+    net_.Forward(ws->z, &ws->y, &ws->jac, &ws->mlp, threads);
+    const int n = dof(), nz = static_cast<int>(ws->z.rows()), chunk = ws->mlp.chunk_size();
+    const int chunks = NumChunks(batch, chunk);
     PrepareHeads(ws, chunks);
     if (grad) {
       ws->ybar.resize(ws->y.rows(), batch);
@@ -323,43 +397,69 @@ class Delan {
     const double scale = 1.0 / batch;
     ParallelForChunks(batch, chunk, threads, [&](int c, int begin, int end) {
       DelanHead<double>& head = ws->heads[c];
+      Eigen::MatrixXd& jq = ws->jq[c];
+      Eigen::MatrixXd& jq_bar = ws->jq_bar[c];
+      Eigen::VectorXd& fgrad = ws->friction_grad[c];
       Eigen::VectorXd tau_hat(n), tbar(n);
       double sum = 0.0;
       for (int b = begin; b < end; ++b) {
-        const auto jb = ws->jac.middleCols(Eigen::Index(b) * n, n);
-        head.Forward(ws->y.col(b), jb, qd.col(b), qdd.col(b));
+        features.ChainJacobian<double>(q.col(b), ws->jac.middleCols(Eigen::Index(b) * nz, nz), &jq);
+        head.Forward(ws->y.col(b), jq, qd.col(b), qdd.col(b));
         head.Torque(tau_hat);
+        AddFriction(qd.col(b), &tau_hat);
         tbar = tau_hat - tau.col(b);
-        sum += tbar.squaredNorm();
+        if (weighted) {
+          sum += tbar.dot(joint_weights.cwiseProduct(tbar));
+          tbar = tbar.cwiseProduct(joint_weights);
+        } else {
+          sum += tbar.squaredNorm();
+        }
         if (!grad) continue;
         tbar *= 2.0 * scale;
-        head.Backward(tbar, ws->y.col(b), jb, ws->ybar.col(b), ws->jbar.middleCols(Eigen::Index(b) * n, n));
+        head.Backward(tbar, ws->y.col(b), jq, ws->ybar.col(b), jq_bar);
+        auto jbar_b = ws->jbar.middleCols(Eigen::Index(b) * nz, nz);
+        features.ChainJacobianTranspose(q.col(b), jq_bar, &jbar_b);
+        AddFrictionGradient(qd.col(b), tbar, &fgrad);
       }
       ws->chunk_loss[c] = sum;
     });
     double loss = 0.0;
     for (int c = 0; c < chunks; ++c) loss += ws->chunk_loss[c];
-    if (grad) net_.Backward(ws->ybar, ws->jbar, grad, nullptr, &ws->mlp, threads);
+    if (grad) {
+      net_.Backward(ws->ybar, ws->jbar, &ws->net_grad, nullptr, &ws->mlp, threads);
+      grad->resize(num_parameters());
+      grad->head(net_.num_parameters()) = ws->net_grad;
+      auto tail = grad->tail(friction_.size());
+      tail.setZero();
+      for (int c = 0; c < chunks; ++c) tail += ws->friction_grad[c];
+    }
     return loss * scale;
   }
 
   /// tau^ and its parts for the batch (q, qd, qdd: n x B), with the energies, the
-  /// power dE/dt and the smallest eigenvalue of H per sample.
+  /// power dE/dt (friction excluded: qd^T tau^ = dE/dt + qd^T f) and the smallest
+  /// eigenvalue of H per sample.
   DelanParts Decompose(const Eigen::MatrixXd& q, const Eigen::MatrixXd& qd, const Eigen::MatrixXd& qdd,
                        DelanWorkspace* ws, int threads = 0) const {
     const int batch = static_cast<int>(q.cols()), n = dof();
     CheckBatch(q, qd, qdd, batch);
-    net_.Forward(q, &ws->y, &ws->jac, &ws->mlp, threads);
-    const int chunk = ws->mlp.chunk_size(), chunks = NumChunks(batch, chunk);
+    const InputFeatures features = options_.features();
+    features.Encode(q, &ws->z);
+    net_.Forward(ws->z, &ws->y, &ws->jac, &ws->mlp, threads);
+    const int nz = static_cast<int>(ws->z.rows()), chunk = ws->mlp.chunk_size();
+    const int chunks = NumChunks(batch, chunk);
     PrepareHeads(ws, chunks);
     DelanParts p;
-    for (Eigen::MatrixXd* m : {&p.torque, &p.inertial, &p.coriolis, &p.gravity}) m->resize(n, batch);
+    for (Eigen::MatrixXd* m : {&p.torque, &p.inertial, &p.coriolis, &p.gravity, &p.friction}) m->resize(n, batch);
     for (Eigen::RowVectorXd* r : {&p.kinetic, &p.potential, &p.power, &p.min_mass_eigenvalue}) r->resize(batch);
     ParallelForChunks(batch, chunk, threads, [&](int c, int begin, int end) {
       DelanHead<double>& head = ws->heads[c];
       for (int b = begin; b < end; ++b) {
-        head.Forward(ws->y.col(b), ws->jac.middleCols(Eigen::Index(b) * n, n), qd.col(b), qdd.col(b));
+        features.ChainJacobian<double>(q.col(b), ws->jac.middleCols(Eigen::Index(b) * nz, nz), &ws->jq[c]);
+        head.Forward(ws->y.col(b), ws->jq[c], qd.col(b), qdd.col(b));
+        p.friction.col(b) = Friction<double>(qd.col(b));
         head.Torque(p.torque.col(b));
+        p.torque.col(b) += p.friction.col(b);
         p.inertial.col(b) = head.inertial();
         p.coriolis.col(b) = head.coriolis();
         p.gravity.col(b) = head.gravity();
@@ -375,6 +475,35 @@ class Delan {
   }
 
  private:
+  // softplus(w) of the viscous (block 0) or Coulomb (block 1) raw parameters.
+  Eigen::VectorXd FrictionCoefficients(int block) const {
+    if (!options_.friction) return Eigen::VectorXd::Zero(dof());
+    Eigen::VectorXd v(dof());
+    for (int j = 0; j < dof(); ++j) v[j] = ActivationValue(Activation::Softplus(), friction_[block * dof() + j]);
+    return v;
+  }
+  // tau += f(qd) without allocating.
+  template <typename V>
+  void AddFriction(const V& qd, Eigen::VectorXd* tau) const {
+    if (!options_.friction) return;
+    const int n = dof();
+    for (int j = 0; j < n; ++j) {
+      (*tau)[j] += ActivationValue(Activation::Softplus(), friction_[j]) * qd[j] +
+                   ActivationValue(Activation::Softplus(), friction_[n + j]) *
+                       std::tanh(qd[j] / options_.coulomb_velocity);
+    }
+  }
+  // dL/dw += tbar_j * softplus'(w) * (qd_j | tanh(qd_j / v_c)).
+  template <typename V>
+  void AddFrictionGradient(const V& qd, const Eigen::VectorXd& tbar, Eigen::VectorXd* grad) const {
+    if (!options_.friction) return;
+    const int n = dof();
+    for (int j = 0; j < n; ++j) {
+      (*grad)[j] += tbar[j] * ActivationDerivative(Activation::Softplus(), friction_[j]) * qd[j];
+      (*grad)[n + j] += tbar[j] * ActivationDerivative(Activation::Softplus(), friction_[n + j]) *
+                        std::tanh(qd[j] / options_.coulomb_velocity);
+    }
+  }
   void CheckBatch(const Eigen::MatrixXd& q, const Eigen::MatrixXd& qd, const Eigen::MatrixXd& qdd,
                   int batch) const {
     DIFFDYN_CHECK(batch > 0 && q.rows() == dof() && qd.rows() == dof() && qdd.rows() == dof() &&
@@ -383,19 +512,36 @@ class Delan {
                   ", ", qd.rows(), " x ", qd.cols(), ", ", qdd.rows(), " x ", qdd.cols());
   }
   void PrepareHeads(DelanWorkspace* ws, int chunks) const {
-    if (!ws->heads.empty() && ws->heads.front().dof() != dof()) ws->heads.clear();
+    if (!ws->heads.empty() && ws->heads.front().dof() != dof()) {
+      ws->heads.clear();
+      ws->jq.clear();
+      ws->jq_bar.clear();
+    }
     while (static_cast<int>(ws->heads.size()) < chunks) ws->heads.emplace_back(options_);
+    const int m = options_.num_outputs();
+    ws->jq.resize(chunks);
+    ws->jq_bar.resize(chunks);
+    for (int c = 0; c < chunks; ++c) {
+      ws->jq[c].resize(m, dof());  // no-op after the first call
+      ws->jq_bar[c].resize(m, dof());
+    }
+    ws->friction_grad.resize(chunks);
+    for (Eigen::VectorXd& g : ws->friction_grad) g.setZero(options_.num_friction_parameters());
     ws->chunk_loss.assign(chunks, 0.0);
   }
 
   DelanOptions options_;
   Mlp<double> net_;
+  Eigen::VectorXd friction_;  // w_v (n), w_c (n), or empty
 };
 
 /// A DeLaN as a continuous-time system for ContinuousTransitionModel
-/// (continuous_model.h): x = (q, qd) (2n), u = tau (n), dx/dt = (qd, H^-1 (tau - c - g)).
+/// (continuous_model.h): x = (q, qd) (2n), dx/dt = (qd, H^-1 (tau - c - g - f)),
+/// u = the torques of the `actuated` joints (0-based, increasing; empty: all n),
+/// the other joints' torque 0.
 struct DelanDynamics {
   std::shared_ptr<const Delan> model;
+  std::vector<int> actuated{};
 
   template <typename T>
   void operator()(const Eigen::Matrix<T, Eigen::Dynamic, 1>& x, const Eigen::Matrix<T, Eigen::Dynamic, 1>& u,
@@ -405,34 +551,56 @@ struct DelanDynamics {
     const Eigen::Matrix<T, Eigen::Dynamic, 1> q = x.head(n), qd = x.tail(n);
     dxdt.resize(2 * n);
     dxdt.head(n) = qd;
-    dxdt.tail(n) = model->ForwardDynamics<T>(q, qd, u);
+    if (actuated.empty()) {
+      dxdt.tail(n) = model->ForwardDynamics<T>(q, qd, u);
+      return;
+    }
+    Eigen::Matrix<T, Eigen::Dynamic, 1> tau = Eigen::Matrix<T, Eigen::Dynamic, 1>::Zero(n);
+    for (std::size_t k = 0; k < actuated.size(); ++k) tau[actuated[k]] = u[static_cast<Eigen::Index>(k)];
+    dxdt.tail(n) = model->ForwardDynamics<T>(q, qd, tau);
   }
 };
 
-/// The "delan" architecture object of a model file:
-/// {"dof", "epsilon", "diagonal_shift", "diagonal_floor", "mlp": {...}}.
+/// The architecture object of a "delan" or "delan-friction" model file:
+/// {"dof", "epsilon", "diagonal_shift", "diagonal_floor", "periodic" (0-based joints),
+/// ["coulomb_velocity" (delan-friction),] "mlp": {...}}.
 inline nlohmann::json DelanArchitectureToJson(const DelanOptions& o) {
-  return {{"dof", o.dof},
-          {"epsilon", o.epsilon},
-          {"diagonal_shift", o.diagonal_shift},
-          {"diagonal_floor", o.diagonal_floor},
-          {"mlp", MlpArchitectureToJson(o.NetworkArchitecture())}};
+  nlohmann::json j = {{"dof", o.dof},
+                      {"epsilon", o.epsilon},
+                      {"diagonal_shift", o.diagonal_shift},
+                      {"diagonal_floor", o.diagonal_floor},
+                      {"periodic", o.periodic},
+                      {"mlp", MlpArchitectureToJson(o.NetworkArchitecture())}};
+  if (o.friction) j["coulomb_velocity"] = o.coulomb_velocity;
+  return j;
 }
 
-/// DelanOptions from a "delan" architecture object; throws diffdyn::Error naming the bad field.
-inline DelanOptions DelanArchitectureFromJson(const nlohmann::json& j) {
+/// DelanOptions from the architecture object of a model file of kind "delan"
+/// (friction false) or "delan-friction"; "periodic" may be absent (none). Throws
+/// diffdyn::Error naming the bad field.
+inline DelanOptions DelanArchitectureFromJson(const nlohmann::json& j, bool friction) {
   DIFFDYN_CHECK(j.is_object(), "architecture must be an object");
   for (const char* key : {"dof", "epsilon", "diagonal_shift", "diagonal_floor", "mlp"}) {
     DIFFDYN_CHECK(j.contains(key), "architecture: missing '", key, "'");
   }
-  for (const char* key : {"epsilon", "diagonal_shift", "diagonal_floor"}) {
-    DIFFDYN_CHECK(j[key].is_number(), "architecture: '", key, "' must be a number");
+  DIFFDYN_CHECK(!friction || j.contains("coulomb_velocity"), "architecture: missing 'coulomb_velocity'");
+  for (const char* key : {"epsilon", "diagonal_shift", "diagonal_floor", "coulomb_velocity"}) {
+    DIFFDYN_CHECK(!j.contains(key) || j[key].is_number(), "architecture: '", key, "' must be a number");
   }
   DelanOptions o;
   o.dof = static_cast<int>(JsonInt(j["dof"], 1, 64, "architecture: 'dof'"));
   o.epsilon = j["epsilon"].get<double>();
   o.diagonal_shift = j["diagonal_shift"].get<double>();
   o.diagonal_floor = j["diagonal_floor"].get<double>();
+  o.friction = friction;
+  if (friction) o.coulomb_velocity = j["coulomb_velocity"].get<double>();
+  if (j.contains("periodic")) {
+    DIFFDYN_CHECK(j["periodic"].is_array() && j["periodic"].size() <= 64,
+                  "architecture: 'periodic' must be an array of joint indices");
+    for (const auto& i : j["periodic"]) {
+      o.periodic.push_back(static_cast<int>(JsonInt(i, 0, o.dof - 1, "architecture: 'periodic' entry")));
+    }
+  }
   const MlpArchitecture mlp = MlpArchitectureFromJson(j["mlp"]);
   DIFFDYN_CHECK(mlp.sizes.size() >= 3 && !mlp.activations.empty(),
                 "architecture: 'mlp' needs at least one hidden layer");
@@ -441,37 +609,46 @@ inline DelanOptions DelanArchitectureFromJson(const nlohmann::json& j) {
   o.activation = mlp.activations.front();
   o.Validate();
   DIFFDYN_CHECK(mlp == o.NetworkArchitecture(), "architecture: 'mlp' is not a DeLaN network for ",
-                o.dof, " joints (sizes [dof, hidden..., ", o.num_outputs(), "], one activation)");
+                o.dof, " joints (sizes [", o.features().size(o.dof), ", hidden..., ", o.num_outputs(),
+                "], one activation)");
   return o;
 }
 
-/// Registers the kind "delan" with the model-file loader (idempotent).
+/// Registers the kinds "delan" and "delan-friction" with the model-file loader (idempotent).
 inline void RegisterDelanKind() {
   static std::once_flag once;
   std::call_once(once, [] {
-    RegisterModelKind("delan", [](const nlohmann::json& j) {
-      return DelanArchitectureFromJson(j).NetworkArchitecture().num_parameters();
-    });
+    for (const bool friction : {false, true}) {
+      RegisterModelKind(friction ? "delan-friction" : "delan", [friction](const nlohmann::json& j) {
+        const DelanOptions o = DelanArchitectureFromJson(j, friction);
+        return o.NetworkArchitecture().num_parameters() + o.num_friction_parameters();
+      });
+    }
   });
 }
 
-/// Saves `model` atomically as a model file of kind "delan".
+/// Whether `kind` is a DeLaN model-file kind.
+inline bool IsDelanKind(const std::string& kind) { return kind == "delan" || kind == "delan-friction"; }
+
+/// Saves `model` atomically as a model file of kind model.options().kind().
 inline void SaveDelan(const std::filesystem::path& path, const Delan& model,
                       const nlohmann::json& provenance = nlohmann::json::object(),
                       const nlohmann::json& metrics = nlohmann::json::object()) {
   RegisterDelanKind();
-  SaveModelFile(path, ModelFile{"delan", DelanArchitectureToJson(model.options()), model.parameters(),
-                                provenance, metrics, nullptr});
+  SaveModelFile(path, ModelFile{model.options().kind(), DelanArchitectureToJson(model.options()),
+                                model.parameters(), provenance, metrics, nullptr});
 }
 
-/// Loads a model file of kind "delan"; throws diffdyn::Error with one line naming the path.
+/// Loads a model file of kind "delan" or "delan-friction"; throws diffdyn::Error
+/// with one line naming the path.
 inline Delan LoadDelan(const std::filesystem::path& path, ModelFile* contents = nullptr) {
   RegisterDelanKind();
   ModelFile file = LoadModelFile(path);
-  DIFFDYN_CHECK(file.kind == "delan", path.string(), ": model kind is '", file.kind, "', expected delan");
+  DIFFDYN_CHECK(IsDelanKind(file.kind), path.string(), ": model kind is '", file.kind,
+                "', expected delan or delan-friction");
   DelanOptions options;
   try {
-    options = DelanArchitectureFromJson(file.architecture);
+    options = DelanArchitectureFromJson(file.architecture, file.kind == "delan-friction");
   } catch (const Error& e) {
     throw Error(StrCat(path.string(), ": ", e.what()));
   }

@@ -69,6 +69,7 @@
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/integrate.h"
 #include "diffdyn/models/init.h"
+#include "diffdyn/models/input_features.h"
 #include "diffdyn/models/mlp.h"
 #include "diffdyn/models/model_file.h"
 #include "diffdyn/models/system_description.h"
@@ -210,75 +211,39 @@ class FeatureMap {
     }
     if (!system.encodes_angles()) return;
     for (int i = 0; i < inputs_; ++i) {
-      if (i < system.state_size() && system.is_angle(i)) angle_inputs_.push_back(i);
+      if (i < system.state_size() && system.is_angle(i)) angles_.periodic.push_back(i);
     }
   }
 
   /// Whether the map is the identity.
-  bool identity() const { return angle_inputs_.empty() && shift_.size() == 0; }
+  bool identity() const { return angles_.periodic.empty() && shift_.size() == 0; }
   /// f, the number of features.
   int features() const { return features_; }
 
   /// f = phi(z) for a batch: z (n + m) x B, f (f x B; resized).
   void Apply(const Eigen::Ref<const Eigen::MatrixXd>& z, Eigen::MatrixXd& f) const {
-    f.resize(features_, z.cols());
-    int row = 0, next_angle = 0;
-    for (int i = 0; i < inputs_; ++i) {
-      if (next_angle < static_cast<int>(angle_inputs_.size()) && angle_inputs_[next_angle] == i) {
-        f.row(row++) = z.row(i).array().sin();
-        f.row(row++) = z.row(i).array().cos();
-        ++next_angle;
-      } else {
-        f.row(row++) = z.row(i);
-      }
-    }
+    angles_.Encode(z, &f);
     if (shift_.size() > 0) f = (f.colwise() - shift_).array().colwise() * inv_scale_.array();
   }
 
   /// g_z = (dphi/dz)^T g_f at z, per column: g_z (n + m) x B (resized), g_f f x B.
   void Vjp(const Eigen::Ref<const Eigen::MatrixXd>& z, const Eigen::Ref<const Eigen::MatrixXd>& g_f,
            Eigen::MatrixXd& g_z) const {
-    g_z.resize(inputs_, z.cols());
-    const bool scaled = shift_.size() > 0;
-    const auto s = [&](int row) { return scaled ? inv_scale_[row] : 1.0; };
-    int row = 0, next_angle = 0;
-    for (int i = 0; i < inputs_; ++i) {
-      if (next_angle < static_cast<int>(angle_inputs_.size()) && angle_inputs_[next_angle] == i) {
-        g_z.row(i) = s(row) * z.row(i).array().cos() * g_f.row(row).array() -
-                     s(row + 1) * z.row(i).array().sin() * g_f.row(row + 1).array();
-        row += 2;
-        ++next_angle;
-      } else {
-        g_z.row(i) = s(row) * g_f.row(row);
-        ++row;
-      }
-    }
+    angles_.PullBack(z, g_f, &g_z, inv_scale_);
   }
 
   /// phi(z) for one sample on any scalar (Jets for derivatives).
   template <typename T>
   VectorX<T> operator()(const VectorX<T>& z) const {
-    using std::cos;
-    using std::sin;
     if (identity()) return z;
-    VectorX<T> f(features_);
-    int row = 0, next_angle = 0;
-    for (int i = 0; i < inputs_; ++i) {
-      if (next_angle < static_cast<int>(angle_inputs_.size()) && angle_inputs_[next_angle] == i) {
-        f[row++] = sin(z[i]);
-        f[row++] = cos(z[i]);
-        ++next_angle;
-      } else {
-        f[row++] = z[i];
-      }
-    }
+    VectorX<T> f = angles_.EncodeOne<T>(z);
     for (int r = 0; r < shift_.size(); ++r) f[r] = (f[r] - shift_[r]) * inv_scale_[r];
     return f;
   }
 
  private:
   int inputs_ = 0, features_ = 0;
-  std::vector<int> angle_inputs_;  // indices of z that are encoded angles, increasing
+  InputFeatures angles_;  // the encoded angles of z, increasing
   Eigen::VectorXd shift_, inv_scale_;  // input scaling (empty: none)
 };
 

@@ -15,8 +15,9 @@
 // weight decay 1e-5, batch 512).
 //
 // Scores (DESIGN.md, eval): *_mse = (1/N) sum_samples sum_joints (y^ - y)^2 for the
-// torque and, where the data has ground-truth channels, H qdd ("m"), c, g, the
-// energies (potential offset-matched); power_mse against qd^T tau; *_nmse the same
+// torque and, where the data has ground-truth channels, H qdd ("m"), c, g, friction
+// ("f"; zero for a DeLaN without friction head), the energies (potential
+// offset-matched); power_mse of dE^/dt + qd^T f^ against qd^T tau; *_nmse the same
 // divided by the total variance; the smallest eigenvalue of H over the samples.
 //
 //   JointData data = ReadMeasured("../shared/data/delan_characters");
@@ -58,11 +59,23 @@ DelanSplit SplitForDelan(const JointData& data, double val_fraction, std::uint64
 TrainOptions DelanTrainDefaults();
 
 /// Trains *model in place on `train`, validating on `val` (may be empty: no
-/// validation). Throws diffdyn::Error for data of another dof, without qdd, or
+/// validation), on the torque loss with `joint_weights` (Delan::TorqueLoss; empty:
+/// the plain MSE of the DeLaN authors). Throws diffdyn::Error for data of another dof, without qdd, or
 /// without measured torques (free motion: has_tau false).
 TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& val,
                        const TrainOptions& options,
-                       const std::function<void(const EpochReport&)>& on_epoch = {});
+                       const std::function<void(const EpochReport&)>& on_epoch = {},
+                       const Eigen::VectorXd& joint_weights = {});
+
+/// Joint weights that give every joint's torque the same say in the loss:
+/// w_j = 1 / Var(tau_j) over `train`; a joint whose torque does not vary (an
+/// unactuated one) gets the largest weight of the others. Throws diffdyn::Error
+/// when no joint's torque varies.
+Eigen::VectorXd BalancedJointWeights(const JointData& train);
+
+/// (1/N) sum |y^ - y|^2 over the total variance (1/N) sum |y - mean y|^2 of the
+/// truth y (rows x N): DESIGN.md's *_nmse; NaN when the truth does not vary.
+double NormalizedMse(const Eigen::MatrixXd& predicted, const Eigen::MatrixXd& truth);
 
 /// The scores of the header comment, by key ("torque_mse", "inertial_mse", ...,
 /// "torque_nmse", ..., "min_mass_eigenvalue"); keys for channels the data lacks are absent.

@@ -51,4 +51,11 @@ struct JointCollectOptions {
 /// simulation diverges.
 Dataset CollectJointData(const JointTask& task, const JointCollectOptions& options);
 
+/// Adds the channels of the file comment (tau, qdd, m, c, g, f, kinetic, potential)
+/// to a trajectory of `task`'s plant that has states (q, qd) (2n x K+1) and actions
+/// (the actuated torques, m x K, each held from its sample; the last sample holds
+/// the last action), e.g. a controller's run on the task (solvers/control.h).
+/// Throws diffdyn::Error for sizes that do not fit the task (a task without delay).
+void AddGroundTruth(const JointTask& task, Trajectory* trajectory);
+
 }  // namespace diffdyn

@@ -7,6 +7,8 @@
 //   pendulum, cartpole,          the analytic model with its default parameters
 //   double-pendulum, arm2, panda (model_conventions.md) through the adapter
 //   oracle                       the ODE-engine pusher (PushingOracle)
+//   delan, delan-friction        a DeLaN's forward dynamics through the adapter
+//                                (u = the torques of options.actuated)
 //
 // Continuous-time models (analytic and extended) integrate x = (q, qd) under a
 // held torque over one transition of `dt` seconds (continuous_model.h); they need
@@ -19,6 +21,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "diffdyn/models/continuous_model.h"
 #include "diffdyn/models/transition_model.h"
@@ -33,6 +36,9 @@ struct LoadModelOptions {
   /// Solver and solver steps per transition of continuous-time models.
   Method method = Method::kRk4Classic;
   int substeps = 4;
+  /// 0-based joints a DeLaN's action drives, increasing (the others get torque 0);
+  /// empty: every joint (u = tau). A control task passes its actuated joints.
+  std::vector<int> actuated{};
   /// The world of the `oracle`.
   PushingConfig world{};
 };

@@ -34,6 +34,7 @@
 
 #include <Eigen/Core>
 
+#include "diffdyn/models/input_features.h"
 #include "diffdyn/models/mlp.h"
 #include "diffdyn/solvers/training.h"
 
@@ -69,21 +70,6 @@ class LinearQuadraticHjb final : public FirstOrderEquation {
   double rho_;
 };
 
-/// The value network's inputs z = phi(x): each state component listed in `periodic`
-/// (0-based, increasing) enters as (sin x_i, cos x_i), so that V is periodic in it; the
-/// others enter as they are. p = dV/dx = (dz/dx)^T dV/dz.
-struct ValueFeatures {
-  std::vector<int> periodic;
-  /// The number of features for n states.
-  int size(int n) const { return n + static_cast<int>(periodic.size()); }
-  /// z (size(n) x B) of states x (n x B).
-  Eigen::MatrixXd Encode(const Eigen::MatrixXd& x) const;
-  /// p (n x B) from dV/dz (size(n) x B) at states x.
-  Eigen::MatrixXd PullBack(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dvdz) const;
-  /// dL/dz (size(n) x B) from dL/dp (n x B) at states x: the transpose of PullBack.
-  Eigen::MatrixXd PushForward(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dldp) const;
-};
-
 /// How V is made of the network's outputs y(z) and their Jacobian dy/dz (mlp.h).
 enum class ValueForm {
   /// V = y (one output).
@@ -104,23 +90,23 @@ struct ValueWorkspace {
 };
 
 /// A scalar function V on a state domain of n components, with p = dV/dx in closed
-/// form from one forward pass: an Mlp on the features z = phi(x) (ValueFeatures) and a
+/// form from one forward pass: an Mlp on the features z = phi(x) (InputFeatures) and a
 /// ValueForm. Sizes: x n x B, V B, p n x B.
 class ValueFunction {
  public:
   ValueFunction() = default;
   /// V = y(phi(x)): `net` maps features.size(n) inputs to 1 output.
-  static ValueFunction Direct(Mlp<double> net, int n, ValueFeatures features = {});
+  static ValueFunction Direct(Mlp<double> net, int n, InputFeatures features = {});
   /// V = e^T L L^T e (ValueForm::kQuadratic) around `goal` (n): `net` maps
   /// d = features.size(n) inputs to d (d + 1) / 2 outputs; epsilon > 0.
-  static ValueFunction Quadratic(Mlp<double> net, const Eigen::VectorXd& goal, ValueFeatures features = {},
+  static ValueFunction Quadratic(Mlp<double> net, const Eigen::VectorXd& goal, InputFeatures features = {},
                                  double epsilon = 1e-3);
   /// The number of network outputs the form needs for d features.
   static int OutputsFor(ValueForm form, int d) { return form == ValueForm::kDirect ? 1 : d * (d + 1) / 2; }
 
   int state_size() const { return n_; }
   ValueForm form() const { return form_; }
-  const ValueFeatures& features() const { return features_; }
+  const InputFeatures& features() const { return features_; }
   /// The goal state (n; quadratic form only, else empty).
   const Eigen::VectorXd& goal() const { return goal_; }
   double epsilon() const { return epsilon_; }
@@ -140,7 +126,7 @@ class ValueFunction {
                 Eigen::VectorXd* grad, ValueWorkspace* ws, int threads = 1) const;
 
  private:
-  ValueFunction(Mlp<double> net, int n, ValueFeatures features, ValueForm form, Eigen::VectorXd goal,
+  ValueFunction(Mlp<double> net, int n, InputFeatures features, ValueForm form, Eigen::VectorXd goal,
                 double epsilon);
   // Per sample b: V_b and dV/dz_b from y, jac and z (quadratic form).
   void QuadraticHead(const ValueWorkspace& ws, Eigen::Index b, double* v, Eigen::Ref<Eigen::VectorXd> dvdz) const;
@@ -151,7 +137,7 @@ class ValueFunction {
 
   Mlp<double> net_;
   int n_ = 0;
-  ValueFeatures features_;
+  InputFeatures features_;
   ValueForm form_ = ValueForm::kDirect;
   Eigen::VectorXd goal_, goal_features_;
   double epsilon_ = 1e-3;
