@@ -142,7 +142,9 @@ void BuildApp(CLI::App& app) {
   app.description("diffdyn: learn, check and use robot dynamics with differential equations as the model prior.");
   app.name("diffdyn");
   app.set_version_flag("--version", "diffdyn " + Version());
-  app.option_defaults()->always_capture_default();
+  // A flag takes no value other than "true": `--free=<number>` is a parse error (exit 2),
+  // not CLI11's numeric conversion of the value.
+  app.option_defaults()->always_capture_default()->disable_flag_override();
   app.require_subcommand(1);
   app.fallthrough(false);
   RegisterCommands(app);

@@ -80,6 +80,17 @@ TEST_F(Hardening, HugeOrWrappingCountsNameTheOption) {
   ExpectBadInput(RunDiffdyn("push --quiet --model oracle --threads -1"), "--threads");
 }
 
+// A flag given a value (`--free=...`; a fuzz finding: an out-of-range number made
+// CLI11's flag conversion throw std::out_of_range, reported as a runtime failure).
+TEST_F(Hardening, FlagsTakeNoValues) {
+  ExpectBadInput(RunDiffdyn("push --free=-99999999999999999999999"), "free was given a disallowed flag override");
+  ExpectBadInput(RunDiffdyn("train --data " + data_ + " --json=7 --out " + TempPath("flag.json")), "json was given");
+  EXPECT_EQ(RunDiffdyn("collect --system pendulum --trajectories 1 --seconds 1 --quiet --json=true --out " +
+                       TempPath("flag_true.csv"))
+                .exit_code,
+            0);
+}
+
 TEST_F(Hardening, NonFiniteOptionValuesAreRefused) {
   ExpectBadInput(RunDiffdyn("diagnose --quiet --model pendulum --measured " + data_ +
                             " --rollout-horizon nan --out " + TempPath("hardening_nan")),
