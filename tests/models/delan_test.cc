@@ -239,7 +239,6 @@ TEST(Delan, TorqueLossGradientMatchesFiniteDifferences) {
   }
   model.SetParameters(theta);
   if (w.size() > 0) {  // the weighted loss itself
-    DelanWorkspace fresh;
     double manual = 0.0;
     for (int b = 0; b < 37; ++b) {
       const Eigen::VectorXd e = model.InverseDynamics<double>(d.q.col(b), d.qd.col(b), d.qdd.col(b)) - d.tau.col(b);
