@@ -324,11 +324,9 @@ class Delan {
   /// f(qd) = viscous * qd + coulomb * tanh(qd / v_c) (n; zeros without friction head), on double or Jets.
   template <typename S>
   Eigen::Matrix<S, Eigen::Dynamic, 1> Friction(const Eigen::Matrix<S, Eigen::Dynamic, 1>& qd) const {
-    using std::tanh;
     Eigen::Matrix<S, Eigen::Dynamic, 1> f = Eigen::Matrix<S, Eigen::Dynamic, 1>::Zero(dof());
     if (!options_.friction) return f;
-    const Eigen::VectorXd v = viscous(), c = coulomb();
-    for (int j = 0; j < dof(); ++j) f[j] = S(v[j]) * qd[j] + S(c[j]) * tanh(qd[j] / S(options_.coulomb_velocity));
+    for (int j = 0; j < dof(); ++j) f[j] = JointFriction(j, qd[j]);
     return f;
   }
 
@@ -482,16 +480,19 @@ class Delan {
     for (int j = 0; j < dof(); ++j) v[j] = ActivationValue(Activation::Softplus(), friction_[block * dof() + j]);
     return v;
   }
-  // tau += f(qd) without allocating.
+  // f_j(qd_j) = softplus(w_v,j) qd_j + softplus(w_c,j) tanh(qd_j / v_c), no allocation.
+  template <typename S>
+  S JointFriction(int j, const S& qd) const {
+    using std::tanh;
+    const Activation softplus = Activation::Softplus();
+    return S(ActivationValue(softplus, friction_[j])) * qd +
+           S(ActivationValue(softplus, friction_[dof() + j])) * tanh(qd / S(options_.coulomb_velocity));
+  }
+  // tau += f(qd).
   template <typename V>
   void AddFriction(const V& qd, Eigen::VectorXd* tau) const {
     if (!options_.friction) return;
-    const int n = dof();
-    for (int j = 0; j < n; ++j) {
-      (*tau)[j] += ActivationValue(Activation::Softplus(), friction_[j]) * qd[j] +
-                   ActivationValue(Activation::Softplus(), friction_[n + j]) *
-                       std::tanh(qd[j] / options_.coulomb_velocity);
-    }
+    for (int j = 0; j < dof(); ++j) (*tau)[j] += JointFriction(j, double(qd[j]));
   }
   // dL/dw += tbar_j * softplus'(w) * (qd_j | tanh(qd_j / v_c)).
   template <typename V>
