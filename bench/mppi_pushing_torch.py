@@ -21,11 +21,10 @@ import argparse
 import json
 import math
 import os
-import time
 
 import torch
 
-from torch_common import blas_in_use, rk4_38_flow
+from torch_common import blas_in_use, rk4_38_flow, time_it
 
 K = 1000
 START = (0.4, 0.0, -0.2 * math.pi)
@@ -123,19 +122,10 @@ class Mppi:
 
 
 def time_commands(model, horizon, repeats):
-    gen = torch.Generator().manual_seed(1)
-    mppi = Mppi(model, horizon, gen)
+    """Median (wall, CPU) seconds of one command from START, after a warm-up."""
+    mppi = Mppi(model, horizon, torch.Generator().manual_seed(1))
     x0 = torch.tensor(START, dtype=torch.float64)
-    mppi.command(x0)  # warm-up
-    wall, cpu = [], []
-    for _ in range(repeats):
-        t0, c0 = time.perf_counter(), time.process_time()
-        mppi.command(x0)
-        wall.append(time.perf_counter() - t0)
-        cpu.append(time.process_time() - c0)
-    wall.sort()
-    cpu.sort()
-    return wall[len(wall) // 2], cpu[len(cpu) // 2]
+    return time_it(lambda: mppi.command(x0), repeats)
 
 
 def ours(bench, prefix):

@@ -19,16 +19,18 @@
 
 namespace diffdyn {
 
-/// x = H^-1 b for symmetric positive definite H (n x n) and b (n), scalar T.
-template <typename T>
-Eigen::Matrix<T, Eigen::Dynamic, 1> SpdSolve(const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>& h,
-                                             const Eigen::Matrix<T, Eigen::Dynamic, 1>& b) {
+/// x = H^-1 b for symmetric positive definite H (n x n) and b (n), any scalar; fixed
+/// sizes stay fixed (no heap allocation).
+template <typename DerivedH, typename DerivedB>
+typename DerivedB::PlainObject SpdSolve(const Eigen::MatrixBase<DerivedH>& h, const Eigen::MatrixBase<DerivedB>& b) {
+  using T = typename DerivedB::Scalar;
+  static_assert(std::is_same_v<T, typename DerivedH::Scalar>, "SpdSolve: H and b need the same scalar");
   if constexpr (std::is_same_v<T, double>) {
     return h.llt().solve(b);
   } else {
     using std::sqrt;
     const Eigen::Index n = h.rows();
-    Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> l(n, n);
+    typename DerivedH::PlainObject l = h;  // overwritten by the factor, lower triangle
     for (Eigen::Index j = 0; j < n; ++j) {
       T d = h(j, j);
       for (Eigen::Index k = 0; k < j; ++k) d -= l(j, k) * l(j, k);
@@ -39,7 +41,7 @@ Eigen::Matrix<T, Eigen::Dynamic, 1> SpdSolve(const Eigen::Matrix<T, Eigen::Dynam
         l(i, j) = s / l(j, j);
       }
     }
-    Eigen::Matrix<T, Eigen::Dynamic, 1> x = b;
+    typename DerivedB::PlainObject x = b;
     for (Eigen::Index i = 0; i < n; ++i) {
       for (Eigen::Index k = 0; k < i; ++k) x[i] -= l(i, k) * x[k];
       x[i] /= l(i, i);

@@ -349,7 +349,7 @@ class Delan {
     using Vec = Eigen::Matrix<S, Eigen::Dynamic, 1>;
     DelanHead<S> head = Head(q, qd, Vec::Zero(dof()).eval());
     const Vec rhs = tau - head.coriolis() - head.gravity() - Friction(qd);
-    return SpdSolve<S>(head.MassMatrix(), rhs);
+    return SpdSolve(head.MassMatrix(), rhs);
   }
 
   /// The full per-sample head (L, H, c, g, energies; no friction) of one sample.

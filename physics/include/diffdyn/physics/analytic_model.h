@@ -15,8 +15,13 @@
 // templated static functions, evaluated on `double` for values and on
 // `ceres::Jet` for derivatives with respect to q, qd, qdd or p:
 //
-//   template <typename T> static VectorX<T> InverseDynamics(q, qd, qdd, p);
-//   template <typename T> static VectorX<T> TipLoad(q, qd, qdd, p);
+//   template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+//   static JointVector<T, kDof> InverseDynamics(const Q& q, const Qd& qd, const Qdd& qdd, const P& p);
+//   (and TipLoad with the same signature)
+//
+// q, qd, qdd and p are any Eigen vectors of scalar T (dynamic or fixed size) and the
+// torque comes back as a fixed-size vector, so that the forward dynamics of the
+// planners' inner loop (AnalyticDynamics) runs without a heap allocation.
 //
 // TipLoad is the joint torque needed to carry a unit point mass at the end of
 // the last link (the `payload` effect scales it by the mass: ID is linear in a
@@ -52,6 +57,10 @@ namespace diffdyn {
 /// Dynamic-size matrix of scalar T.
 template <typename T>
 using MatrixX = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>;
+
+/// A fixed-size vector of N joint quantities of scalar T (the models' torques).
+template <typename T, int N>
+using JointVector = Eigen::Matrix<T, N, 1>;
 
 /// Number of derivative directions of the Jets used by diagnosis fits (at most
 /// this many parameters are differentiated at once).
@@ -190,6 +199,15 @@ class AnalyticModel {
   }
 };
 
+/// v (N) as a dynamic-size vector, copied entry by entry (g++ 12 takes Eigen's masked
+/// AVX-512 load of a small fixed-size vector for an out-of-bounds read, -Warray-bounds).
+template <typename T, int N>
+VectorX<T> ToDynamic(const JointVector<T, N>& v) {
+  VectorX<T> out(N);
+  for (int i = 0; i < N; ++i) out[i] = v[i];
+  return out;
+}
+
 /// AnalyticModel over a struct `Model` with static members kName, kDof, Specs(),
 /// Prismatic(j), InverseDynamics<T>(q, qd, qdd, p) and TipLoad<T>(q, qd, qdd, p).
 template <typename Model>
@@ -203,21 +221,21 @@ class AnalyticModelAdapter final : public AnalyticModel {
   Eigen::VectorXd InverseDynamics(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                   const Eigen::VectorXd& qdd,
                                   const Eigen::VectorXd& p) const override {
-    return Model::template InverseDynamics<double>(q, qd, qdd, p);
+    return ToDynamic(Model::template InverseDynamics<double>(q, qd, qdd, p));
   }
   VectorX<DiagJet> InverseDynamics(const VectorX<DiagJet>& q, const VectorX<DiagJet>& qd,
                                    const VectorX<DiagJet>& qdd,
                                    const VectorX<DiagJet>& p) const override {
-    return Model::template InverseDynamics<DiagJet>(q, qd, qdd, p);
+    return ToDynamic(Model::template InverseDynamics<DiagJet>(q, qd, qdd, p));
   }
   Eigen::VectorXd TipLoad(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                           const Eigen::VectorXd& qdd, const Eigen::VectorXd& p) const override {
-    return Model::template TipLoad<double>(q, qd, qdd, p);
+    return ToDynamic(Model::template TipLoad<double>(q, qd, qdd, p));
   }
   VectorX<DiagJet> TipLoad(const VectorX<DiagJet>& q, const VectorX<DiagJet>& qd,
                            const VectorX<DiagJet>& qdd,
                            const VectorX<DiagJet>& p) const override {
-    return Model::template TipLoad<DiagJet>(q, qd, qdd, p);
+    return ToDynamic(Model::template TipLoad<DiagJet>(q, qd, qdd, p));
   }
 
   VectorX<DiagJet> Dynamics(const Eigen::VectorXd& p, const std::vector<int>& actuated,
@@ -239,7 +257,7 @@ class AnalyticModelAdapter final : public AnalyticModel {
 /// (continuous_model.h), on any scalar: x = (q, qd) (2n), theta = p, u the torques of
 /// the joints in `actuated` (a entries; empty: every joint, a = n),
 ///
-///   dx/dt = (qd, M(q)^{-1} (B u - ID(q, qd, 0) - D qd)),   M(q) e_i = ID(q, 0, e_i) - ID(q, 0, 0),
+///   dx/dt = (qd, M(q)^{-1} (B u - ID(q, qd, 0) - D qd)),   M(q) e_i = ID(q, qd, e_i) - ID(q, qd, 0),
 ///
 /// B the n x a selection of the actuated joints, D = diag(damping) the viscous joint
 /// friction (n entries; empty: none).
@@ -250,20 +268,21 @@ struct AnalyticDynamics {
   /// Viscous friction coefficient of each joint (n), or empty.
   Eigen::VectorXd damping{};
 
+  /// dx/dt (2n) at x (2n), u (a) and theta; fixed-size temporaries only (no heap
+  /// allocation once dxdt has its size).
   template <typename T>
   void operator()(const VectorX<T>& x, const VectorX<T>& u, const VectorX<T>& theta, double,
                   VectorX<T>& dxdt) const {
     constexpr int n = Model::kDof;
-    const VectorX<T> q = x.head(n), qd = x.tail(n);
-    const VectorX<T> zero = VectorX<T>::Zero(n);
-    const VectorX<T> gravity = Model::template InverseDynamics<T>(q, zero, zero, theta);
-    MatrixX<T> mass(n, n);
+    using Vector = JointVector<T, n>;
+    const Vector q = x.template head<n>(), qd = x.template tail<n>();
+    // n + 1 calls: the bias c + g, then the mass matrix's columns (ID is affine in qdd).
+    const Vector bias = Model::template InverseDynamics<T>(q, qd, Vector::Zero().eval(), theta);
+    Eigen::Matrix<T, n, n> mass;
     for (int i = 0; i < n; ++i) {
-      VectorX<T> e = zero;
-      e[i] = T(1.0);
-      mass.col(i) = Model::template InverseDynamics<T>(q, zero, e, theta) - gravity;
+      mass.col(i) = Model::template InverseDynamics<T>(q, qd, Vector::Unit(i).eval(), theta) - bias;
     }
-    VectorX<T> force = -Model::template InverseDynamics<T>(q, qd, zero, theta);
+    Vector force = -bias;
     if (actuated.empty()) {
       force += u;
     } else {
@@ -271,8 +290,8 @@ struct AnalyticDynamics {
     }
     for (Eigen::Index j = 0; j < damping.size(); ++j) force[j] -= damping[j] * qd[j];
     dxdt.resize(2 * n);
-    dxdt.head(n) = qd;
-    dxdt.tail(n) = SpdSolve(mass, force);  // mass.llt() would drop Jets whose value is 0
+    dxdt.template head<n>() = qd;
+    dxdt.template tail<n>() = SpdSolve(mass, force);  // mass.llt() would drop Jets whose value is 0
   }
 };
 

@@ -54,9 +54,8 @@ struct PandaModel {
   /// RNEA (header comment) with link masses scaled by `link_scale` (1 = the
   /// published links, 0 = none) and an extra point mass `tip_mass` at `tip_com`
   /// in the flange frame. Returns tau (7).
-  template <typename T>
-  static VectorX<T> Rnea(const VectorX<T>& q, const VectorX<T>& qd, const VectorX<T>& qdd,
-                         const T& gravity, double link_scale, const T& tip_mass,
+  template <typename T, typename Q, typename Qd, typename Qdd>
+  static JointVector<T, 7> Rnea(const Q& q, const Qd& qd, const Qdd& qdd, const T& gravity, double link_scale, const T& tip_mass,
                          const Eigen::Matrix<T, 3, 1>& tip_com) {
     using Vec3 = Eigen::Matrix<T, 3, 1>;
     using Mat3 = Eigen::Matrix<T, 3, 3>;
@@ -94,7 +93,7 @@ struct PandaModel {
     }
 
     // Backward pass: forces and moments transmitted through the joints.
-    VectorX<T> tau(7);
+    JointVector<T, 7> tau;
     Vec3 f_next = Vec3::Zero(), n_next = Vec3::Zero();
     for (int i = 6; i >= 0; --i) {
       Vec3 f = force[i], n = moment[i] + com[i].cross(force[i]);
@@ -111,17 +110,15 @@ struct PandaModel {
   }
 
   /// tau = M(q) qdd + C(q, qd) qd + g(q) of the published links plus the known tool.
-  template <typename T>
-  static VectorX<T> InverseDynamics(const VectorX<T>& q, const VectorX<T>& qd,
-                                    const VectorX<T>& qdd, const VectorX<T>& p) {
+  template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+  static JointVector<T, kDof> InverseDynamics(const Q& q, const Qd& qd, const Qdd& qdd, const P& p) {
     const Eigen::Matrix<T, 3, 1> tool_com(p[1], p[2], p[3]);
     return Rnea<T>(q, qd, qdd, p[4], 1.0, p[0], tool_com);
   }
 
   /// Torque (7) that 1 kg at the flange origin needs.
-  template <typename T>
-  static VectorX<T> TipLoad(const VectorX<T>& q, const VectorX<T>& qd, const VectorX<T>& qdd,
-                            const VectorX<T>& p) {
+  template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+  static JointVector<T, kDof> TipLoad(const Q& q, const Qd& qd, const Qdd& qdd, const P& p) {
     return Rnea<T>(q, qd, qdd, p[4], 0.0, T(1.0), Eigen::Matrix<T, 3, 1>::Zero());
   }
 };

@@ -46,22 +46,20 @@ struct PendulumModel {
   static bool Prismatic(int) { return false; }
 
   /// tau = m l^2 qdd + m g l sin q.
-  template <typename T>
-  static VectorX<T> InverseDynamics(const VectorX<T>& q, const VectorX<T>& /*qd*/,
-                                    const VectorX<T>& qdd, const VectorX<T>& p) {
+  template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+  static JointVector<T, kDof> InverseDynamics(const Q& q, const Qd& /*qd*/, const Qdd& qdd, const P& p) {
     using std::sin;
     const T& m = p[0];
     const T& l = p[1];
     const T& g = p[2];
-    VectorX<T> tau(1);
+    JointVector<T, kDof> tau;
     tau[0] = m * l * l * qdd[0] + m * g * l * sin(q[0]);
     return tau;
   }
 
   /// Tip load of 1 kg at the bob: l^2 qdd + g l sin q.
-  template <typename T>
-  static VectorX<T> TipLoad(const VectorX<T>& q, const VectorX<T>& qd, const VectorX<T>& qdd,
-                            const VectorX<T>& p) {
+  template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+  static JointVector<T, kDof> TipLoad(const Q& q, const Qd& qd, const Qdd& qdd, const P& p) {
     VectorX<T> unit = p;
     unit[0] = T(1.0);
     return InverseDynamics<T>(q, qd, qdd, unit);
@@ -81,9 +79,8 @@ struct CartPoleModel {
   static bool Prismatic(int joint) { return joint == 0; }
 
   /// tau = H(q) qdd + (-m_p l sin th thd^2, -m_p g l sin th).
-  template <typename T>
-  static VectorX<T> InverseDynamics(const VectorX<T>& q, const VectorX<T>& qd,
-                                    const VectorX<T>& qdd, const VectorX<T>& p) {
+  template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+  static JointVector<T, kDof> InverseDynamics(const Q& q, const Qd& qd, const Qdd& qdd, const P& p) {
     using std::cos;
     using std::sin;
     const T& mc = p[0];
@@ -91,16 +88,15 @@ struct CartPoleModel {
     const T& l = p[2];
     const T& g = p[3];
     const T c = cos(q[1]), s = sin(q[1]);
-    VectorX<T> tau(2);
+    JointVector<T, kDof> tau;
     tau[0] = (mc + mp) * qdd[0] + mp * l * c * qdd[1] - mp * l * s * qd[1] * qd[1];
     tau[1] = mp * l * c * qdd[0] + mp * l * l * qdd[1] - mp * g * l * s;
     return tau;
   }
 
   /// Tip load of 1 kg at the pole's end: ID with m_cart = 0, m_pole = 1.
-  template <typename T>
-  static VectorX<T> TipLoad(const VectorX<T>& q, const VectorX<T>& qd, const VectorX<T>& qdd,
-                            const VectorX<T>& p) {
+  template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+  static JointVector<T, kDof> TipLoad(const Q& q, const Qd& qd, const Qdd& qdd, const P& p) {
     VectorX<T> unit = p;
     unit[0] = T(0.0);
     unit[1] = T(1.0);
@@ -122,9 +118,8 @@ struct DoublePendulumModel {
   static bool Prismatic(int) { return false; }
 
   /// tau = M(q) qdd + c(q, qd) + g(q), terms in the header comment.
-  template <typename T>
-  static VectorX<T> InverseDynamics(const VectorX<T>& q, const VectorX<T>& qd,
-                                    const VectorX<T>& qdd, const VectorX<T>& p) {
+  template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+  static JointVector<T, kDof> InverseDynamics(const Q& q, const Qd& qd, const Qdd& qdd, const P& p) {
     using std::cos;
     using std::sin;
     const T& m1 = p[0];
@@ -138,7 +133,7 @@ struct DoublePendulumModel {
     const T m11 = (m1 + m2) * l1 * l1 + m2 * l2 * l2 + T(2.0) * k * c2;
     const T m12 = m2 * l2 * l2 + k * c2;
     const T m22 = m2 * l2 * l2;
-    VectorX<T> tau(2);
+    JointVector<T, kDof> tau;
     tau[0] = m11 * qdd[0] + m12 * qdd[1] - k * s2 * (T(2.0) * qd[0] * qd[1] + qd[1] * qd[1]) +
              (m1 + m2) * g * l1 * s1 + m2 * g * l2 * s12;
     tau[1] = m12 * qdd[0] + m22 * qdd[1] + k * s2 * qd[0] * qd[0] + m2 * g * l2 * s12;
@@ -146,9 +141,8 @@ struct DoublePendulumModel {
   }
 
   /// Tip load of 1 kg at the end of link 2: ID with m1 = 0, m2 = 1.
-  template <typename T>
-  static VectorX<T> TipLoad(const VectorX<T>& q, const VectorX<T>& qd, const VectorX<T>& qdd,
-                            const VectorX<T>& p) {
+  template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+  static JointVector<T, kDof> TipLoad(const Q& q, const Qd& qd, const Qdd& qdd, const P& p) {
     VectorX<T> unit = p;
     unit[0] = T(0.0);
     unit[1] = T(1.0);
@@ -175,16 +169,15 @@ struct Arm2Model {
   static bool Prismatic(int) { return false; }
 
   /// tau = H(q) qdd + c(q, qd) + g(q), terms in the header comment.
-  template <typename T>
-  static VectorX<T> InverseDynamics(const VectorX<T>& q, const VectorX<T>& qd,
-                                    const VectorX<T>& qdd, const VectorX<T>& p) {
+  template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+  static JointVector<T, kDof> InverseDynamics(const Q& q, const Qd& qd, const Qdd& qdd, const P& p) {
     using std::cos;
     using std::sin;
     const T c2 = cos(q[1]), s2 = sin(q[1]);
     const T c12 = cos(q[0] + q[1]);
     const T h11 = p[0] + T(2.0) * p[2] * c2;
     const T h12 = p[1] + p[2] * c2;
-    VectorX<T> tau(2);
+    JointVector<T, kDof> tau;
     tau[0] = h11 * qdd[0] + h12 * qdd[1] - p[2] * s2 * (T(2.0) * qd[0] * qd[1] + qd[1] * qd[1]) +
              p[3] * cos(q[0]) + p[4] * c12;
     tau[1] = h12 * qdd[0] + p[1] * qdd[1] + p[2] * s2 * qd[0] * qd[0] + p[4] * c12;
@@ -192,9 +185,8 @@ struct Arm2Model {
   }
 
   /// Tip load of 1 kg: J^T (a_tip + (0, g)) for the planar tip of the header comment.
-  template <typename T>
-  static VectorX<T> TipLoad(const VectorX<T>& q, const VectorX<T>& qd, const VectorX<T>& qdd,
-                            const VectorX<T>& p) {
+  template <typename T, typename Q, typename Qd, typename Qdd, typename P>
+  static JointVector<T, kDof> TipLoad(const Q& q, const Qd& qd, const Qdd& qdd, const P& p) {
     using std::cos;
     using std::sin;
     const T& l1 = p[5];
@@ -207,7 +199,7 @@ struct Arm2Model {
     const T ax = -l1 * (s1 * a1 + c1 * w1 * w1) - l2 * (s12 * a2 + c12 * w2 * w2);
     const T ay = l1 * (c1 * a1 - s1 * w1 * w1) + l2 * (c12 * a2 - s12 * w2 * w2);
     const T fx = ax, fy = ay + g;
-    VectorX<T> tau(2);
+    JointVector<T, kDof> tau;
     tau[0] = (-l1 * s1 - l2 * s12) * fx + (l1 * c1 + l2 * c12) * fy;
     tau[1] = -l2 * s12 * fx + l2 * c12 * fy;
     return tau;
