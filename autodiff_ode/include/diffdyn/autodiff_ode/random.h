@@ -14,7 +14,6 @@
 #pragma once
 
 #include <cmath>
-#include <cstddef>
 #include <cstdint>
 #include <limits>
 #include <numbers>
@@ -92,15 +91,12 @@ void FillStandardNormal(Generator& rng, double* z, std::int64_t n) {
   }
 }
 
-/// An index in [0, n) (n >= 1), by the generator's 64 bits modulo n.
-inline std::size_t UniformIndex(Rng& rng, std::size_t n) { return static_cast<std::size_t>(rng() % n); }
-
 /// Seeded Fisher-Yates shuffle of a random-access range.
 template <typename It>
 void Shuffle(It first, It last, Rng& rng) {
   const auto n = last - first;
   for (auto i = n - 1; i > 0; --i) {
-    const auto j = static_cast<decltype(i)>(UniformIndex(rng, static_cast<std::size_t>(i + 1)));
+    const auto j = static_cast<decltype(i)>(rng() % static_cast<std::uint64_t>(i + 1));
     std::swap(first[i], first[j]);
   }
 }
