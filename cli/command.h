@@ -71,5 +71,6 @@ void RegisterEvalCommand(CLI::App& app);
 void RegisterPushCommand(CLI::App& app);
 void RegisterControlCommand(CLI::App& app);
 void RegisterHjbCommand(CLI::App& app);
+void RegisterSweepCommand(CLI::App& app);
 
 }  // namespace diffdyn::cli

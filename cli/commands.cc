@@ -12,6 +12,7 @@ void RegisterCommands(CLI::App& app) {
   RegisterHjbCommand(app);
   RegisterInfoCommand(app);
   RegisterPushCommand(app);
+  RegisterSweepCommand(app);
   RegisterTrainCommand(app);
 }
 

@@ -21,6 +21,18 @@ if(DIFFDYN_USE_BLAS)
     message(STATUS "diffdyn: OpenBLAS not found; network products use Eigen (scripts/install-deps installs libopenblas-dev)")
   endif()
 endif()
+# Open MPI for `diffdyn sweep` under mpirun (optional: without it, sweeps run on
+# local worker processes only).
+set(DIFFDYN_WITH_MPI_FOUND OFF)
+if(DIFFDYN_WITH_MPI)
+  set(MPI_CXX_SKIP_MPICXX ON)  # the C API only, no deprecated C++ bindings
+  find_package(MPI COMPONENTS CXX)
+  if(MPI_CXX_FOUND)
+    set(DIFFDYN_WITH_MPI_FOUND ON)
+  else()
+    message(STATUS "diffdyn: MPI not found; `diffdyn sweep` runs local workers only (scripts/install-deps installs libopenmpi-dev)")
+  endif()
+endif()
 find_path(DIFFDYN_CERES_JET_INCLUDE_DIR ceres/jet.h REQUIRED)
 if(DIFFDYN_BUILD_TESTS)
   find_package(GTest REQUIRED)

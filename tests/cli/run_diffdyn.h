@@ -27,13 +27,14 @@ struct CommandResult {
   std::string err;
 };
 
-/// Runs `DIFFDYN_EXE args` through the shell (args are shell-quoted by the caller).
-inline CommandResult RunDiffdyn(const std::string& args) {
+/// Runs `launcher DIFFDYN_EXE args` through the shell (args are shell-quoted by the
+/// caller; `launcher` is e.g. "mpirun -np 2 ", or empty).
+inline CommandResult RunDiffdyn(const std::string& args, const std::string& launcher = "") {
   std::string err_file = ::testing::TempDir() + "/diffdyn_cli_XXXXXX";
   const int fd = mkstemp(err_file.data());
   EXPECT_GE(fd, 0);
   if (fd >= 0) close(fd);
-  const std::string command = std::string(DIFFDYN_EXE) + " " + args + " 2>" + err_file;
+  const std::string command = launcher + std::string(DIFFDYN_EXE) + " " + args + " 2>" + err_file;
   CommandResult result;
   FILE* pipe = popen(command.c_str(), "r");
   EXPECT_NE(pipe, nullptr);
