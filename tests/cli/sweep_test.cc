@@ -1,6 +1,11 @@
-// diffdyn sweep: a grid of collect runs on local workers, restart without redoing
-// finished tasks, a failing task recorded, the same gathered CSV under
-// `mpirun -np 2`, and bad specs refused with one line (exit 2) and nothing written.
+// diffdyn sweep: a grid of collect runs on local workers, a restart (after lost
+// records or a killed sweep) that runs only what is missing, a failing task
+// recorded, the same gathered CSV under `mpirun -np 2`, and bad specs refused with
+// one line (exit 2) and nothing written.
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -109,6 +114,39 @@ TEST(Sweep, ARestartRunsOnlyTheTasksWithoutAResult) {
   EXPECT_EQ(CountLines(r.err), 3) << r.err;  // the note and two task lines
   EXPECT_EQ(ReadAll(out + "/tasks/0/result.json"), kept);
   EXPECT_EQ(Comparable(out + "/results.csv", out), first);
+}
+
+TEST(Sweep, ASweepKilledMidwayResumesWithoutRedoingFinishedTasks) {
+  const std::string spec = TempPath("sweep_killed.json"), out = TempPath("sweep_killed");
+  std::ofstream(spec) << R"({"command": "control", "options": {"--system": "pendulum", "--controller": "mppi",
+    "--starts": 2, "--samples": 200, "--quiet": true}, "grid": {"--seed": [1, 2, 3, 4, 5, 6]}})";
+  fs::remove_all(out);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    ::execl(DIFFDYN_EXE, "diffdyn", "sweep", "--spec", spec.c_str(), "--out", out.c_str(), "--workers", "1",
+            "--quiet", static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  ASSERT_GT(pid, 0);
+  // Kill the sweep (as a scheduler's time limit would) right after its first task is recorded.
+  for (int i = 0; i < 6000 && !fs::exists(out + "/tasks/0/result.json"); ++i) ::usleep(10000);
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGTERM);
+  int recorded = 0;
+  for (int i = 0; i < 6; ++i) recorded += fs::exists(out + "/tasks/" + std::to_string(i) + "/result.json");
+  ASSERT_GE(recorded, 1);
+  ASSERT_LT(recorded, 6) << "the sweep ended before it was killed";
+  EXPECT_FALSE(fs::exists(out + "/results.csv"));
+
+  const auto r = RunDiffdyn("sweep --spec " + spec + " --out " + out + " --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["recorded"], recorded);
+  EXPECT_EQ(j["done"], 6);
+  EXPECT_EQ(CountLines(r.err), 1 + 6 - recorded) << r.err;  // the note and one line per task run
+  EXPECT_EQ(CountLines(ReadAll(out + "/results.csv")), 7);
 }
 
 TEST(Sweep, AFailingTaskIsRecordedWithItsExitCodeAndTheSweepGoesOn) {
