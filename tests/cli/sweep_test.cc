@@ -118,8 +118,8 @@ TEST(Sweep, ARestartRunsOnlyTheTasksWithoutAResult) {
 
 TEST(Sweep, ASweepKilledMidwayResumesWithoutRedoingFinishedTasks) {
   const std::string spec = TempPath("sweep_killed.json"), out = TempPath("sweep_killed");
-  std::ofstream(spec) << R"({"command": "control", "options": {"--system": "pendulum", "--controller": "mppi",
-    "--starts": 2, "--samples": 200, "--quiet": true}, "grid": {"--seed": [1, 2, 3, 4, 5, 6]}})";
+  std::ofstream(spec) << R"({"command": "collect", "options": {"--system": "pendulum", "--trajectories": 30,
+    "--seconds": 5, "--quiet": true}, "grid": {"--seed": [1, 2, 3, 4, 5, 6]}})";
   fs::remove_all(out);
   const pid_t pid = ::fork();
   if (pid == 0) {
