@@ -46,6 +46,7 @@
 #include "diffdyn/solvers/multiple_shooting.h"
 #include "diffdyn/solvers/load_model.h"
 #include "diffdyn/solvers/pushing_trials.h"
+#include "diffdyn/solvers/statistics.h"
 
 namespace diffdyn::cli {
 namespace {
@@ -71,13 +72,6 @@ std::unique_ptr<TransitionModel> PlanningModel(const ControlCommandOptions& o, c
   if (o.model.empty() || o.model == o.system) return TaskModel(task, o.dt, 1);
   return LoadTransitionModel(o.model, {.dt = o.dt, .method = Method::kRk4Classic, .substeps = 1,
                                        .actuated = TaskActuatedJoints(task)});
-}
-
-// The value below which a fraction p of the sorted values lie (nearest rank).
-double Percentile(std::vector<double> v, double p) {
-  std::sort(v.begin(), v.end());
-  const auto rank = static_cast<std::size_t>(std::ceil(p * static_cast<double>(v.size())));
-  return v[std::min(v.size() - 1, rank == 0 ? 0 : rank - 1)];
 }
 
 void WriteStarts(const fs::path& path, const std::vector<ControlRun>& runs) {

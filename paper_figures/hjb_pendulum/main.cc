@@ -34,6 +34,7 @@
 #include "diffdyn/solvers/hjb.h"
 #include "diffdyn/solvers/lqr.h"
 #include "diffdyn/solvers/multiple_shooting.h"
+#include "diffdyn/solvers/statistics.h"
 
 namespace fs = std::filesystem;
 using namespace diffdyn;
@@ -70,13 +71,6 @@ void AppendGrid(const ControlTask& task, const ValueFunction& value, const HjbSt
     out << r.stage + 1 << ',' << r.rho << ',' << x(0, k) - kPi << ',' << x(1, k) << ',' << v[k] << ','
         << hjb.Policy(x.col(k), p.col(k))[0] << '\n';
   }
-}
-
-// The nearest-rank percentile.
-double Percentile(std::vector<double> v, double p) {
-  std::sort(v.begin(), v.end());
-  const auto rank = static_cast<std::size_t>(std::ceil(p * static_cast<double>(v.size())));
-  return v[std::min(v.size() - 1, rank == 0 ? 0 : rank - 1)];
 }
 
 struct Evaluated {
