@@ -39,9 +39,9 @@ struct DiagnoseOptions {
   DiagnosisOptions pipeline;
 };
 
-// Nominal parameters: defaults, then --params FILE.json, then --param overrides.
-Eigen::VectorXd ResolveParams(const AnalyticModel& model, const DiagnoseOptions& o) {
-  Eigen::VectorXd p = model.DefaultParams();
+// Nominal parameters: `p` (the model's defaults or a fed-back file's), then
+// --params FILE.json, then --param overrides.
+Eigen::VectorXd ResolveParams(const AnalyticModel& model, const DiagnoseOptions& o, Eigen::VectorXd p) {
   if (!o.params_file.empty()) {
     try {
       p = ReadParamsFile(model, o.params_file, p);
@@ -114,7 +114,9 @@ std::string Report(const DiagnoseOptions& o, const AnalyticModel& model, const E
   if (!data.notes.empty()) md << "; " << data.notes;
   md << "\n- rows used: " << r.train_rows << " train, " << r.heldout_rows << " held out; independent samples in the "
      << "train part n_eff = " << Num(r.n_eff_train, 3) << "\n";
-  md << "- torque-sensor noise estimate per joint (RMS of raw − smoothed): " << JointList(r.tau_noise, 3) << "\n";
+  md << "- torque-sensor noise σ per joint (robust, from each raw sample's deviation from its neighbours' line): "
+     << JointList(r.noise_std, 3) << "; velocity noise σ: " << JointList(r.qd_noise_std, 3) << "\n";
+  if (r.static_data) md << "- **static data**: no joint moves; velocity-dependent effects cannot be identified\n";
   for (const auto& note : r.notes) md << "- " << note << "\n";
   md << "\nNominal parameters used:\n\n| parameter | given | used | unit | meaning |\n|---|---|---|---|---|\n";
   for (std::size_t i = 0; i < model.param_specs().size(); ++i) {
@@ -146,12 +148,21 @@ std::string Report(const DiagnoseOptions& o, const AnalyticModel& model, const E
     r.residual_correlation.row(j).cwiseAbs().maxCoeff(&c);
     md << "| r" << j + 1 << " | " << names[c / n] << (c % n) + 1 << " | " << Num(r.residual_correlation(j, c), 3) << " |\n";
   }
-  md << "\n## How the cause was named\n\nForward stepwise selection (EBIC with a multiple-testing term, "
-        "blocked cross-validation, practical size):\n\n| candidate | EBIC before | EBIC after | CV before | CV after | size / noise | decision |\n|---|---|---|---|---|---|---|\n";
+  md << "\n## How the cause was named\n\nForward stepwise selection: the BIC-best candidate, its likelihood-ratio "
+        "test against Holm's family-wise threshold (α = "
+     << Num(o.pipeline.alpha, 3)
+     << "), blocked cross-validation, admissible values, torque size against the sensor noise:\n\n"
+        "| candidate | deviance before | deviance after | p | threshold | CV before | CV after | size / noise | decision |\n"
+        "|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& s : r.steps) {
-    md << "| " << s.candidate << " | " << Num(s.ebic_before, 6) << " | " << Num(s.ebic_after, 6) << " | "
-       << Num(s.cv_before, 4) << " | " << Num(s.cv_after, 4) << " | " << Num(s.contribution_to_noise, 3) << " | "
-       << s.reason << " |\n";
+    md << "| " << s.candidate << " | " << Num(s.deviance_before, 6) << " | " << Num(s.deviance_after, 6) << " | "
+       << Num(s.p_value, 3) << " | " << Num(s.threshold, 3) << " | " << Num(s.cv_before, 4) << " | "
+       << Num(s.cv_after, 4) << " | " << Num(s.effect_to_noise, 3) << " | " << s.reason << " |\n";
+  }
+  md << "\n## What the data cannot identify\n\n";
+  if (r.not_identifiable.empty()) md << "Every candidate effect is excited by the data.\n";
+  for (const auto& u : r.not_identifiable) {
+    md << "- " << EffectLabel(Effect{u.kind, u.joint, {}, {}}) << ": " << u.reason << "\n";
   }
   md << "\n## Gains on held-out data\n\n| split | held-out rows | extended | learned residual only |"
      << (model.name() == "panda" ? " published friction (Gaz et al.) |" : "") << "\n|---|---|---|---|"
@@ -168,9 +179,30 @@ std::string Report(const DiagnoseOptions& o, const AnalyticModel& model, const E
   return md.str();
 }
 
+bool IsAnalyticName(const std::string& name) {
+  const auto names = AnalyticModelNames();
+  return std::find(names.begin(), names.end(), name) != names.end();
+}
+
+// The model under test with its nominal parameters: an analytic model by name,
+// or an extended-physics file (a diagnosis fed back).
+ExtendedModel ModelUnderTest(const DiagnoseOptions& o) {
+  if (IsAnalyticName(o.model)) {
+    const auto model = MakeAnalyticModel(o.model);
+    return ExtendedModel(model, ResolveParams(*model, o, model->DefaultParams()), {});
+  }
+  try {
+    const ExtendedModel fed = LoadExtendedModel(o.model);
+    return fed.WithNominalParams(ResolveParams(fed.model(), o, fed.params()));
+  } catch (const Error& e) {
+    throw Error(StrCat("--model ", e.what()));
+  }
+}
+
 void RunDiagnose(DiagnoseOptions& o) {
-  const auto model = MakeAnalyticModel(o.model);
-  const Eigen::VectorXd params = ResolveParams(*model, o);
+  const ExtendedModel under_test = ModelUnderTest(o);
+  const auto model = under_test.model_ptr();
+  const Eigen::VectorXd params = under_test.params();
   JointData data = ReadMeasured(o.measured);
   DIFFDYN_CHECK(data.dof() == model->dof(), "--measured ", o.measured, " has ", data.dof(), " joints but --model ",
                 o.model, " has ", model->dof());
@@ -189,7 +221,7 @@ void RunDiagnose(DiagnoseOptions& o) {
     start[model->ParamIndex("l1")] = 1.0;
     start[model->ParamIndex("l2")] = data.link_lengths_px[1] / data.link_lengths_px[0];
   }
-  const DiagnosisResult r = Diagnose(model, start, data, pipeline);
+  const DiagnosisResult r = Diagnose(under_test.WithNominalParams(start), data, pipeline);
   fs::create_directories(o.out);  // only once every input has been checked
 
   // Outputs: model file, residual CSV, plots, report.
@@ -217,6 +249,10 @@ void RunDiagnose(DiagnoseOptions& o) {
                        {"params", e.params}});
   }
   auto list = [](const Eigen::VectorXd& v) { return std::vector<double>(v.data(), v.data() + v.size()); };
+  nlohmann::json unidentifiable = nlohmann::json::array();
+  for (const auto& u : r.not_identifiable) {
+    unidentifiable.push_back({{"kind", Info(u.kind).name}, {"joint", u.joint}, {"reason", u.reason}});
+  }
   nlohmann::json splits = nlohmann::json::array();
   for (const auto& s : r.splits) {
     splits.push_back({{"name", s.name},
@@ -233,6 +269,10 @@ void RunDiagnose(DiagnoseOptions& o) {
                {"heldout_sse_removed", r.heldout_sse_removed},
                {"no_significant_discrepancy", r.no_significant_discrepancy},
                {"named_effects", effects},
+               {"noise_std", list(r.noise_std)},
+               {"not_identifiable", unidentifiable},
+               {"static_data", r.static_data},
+               {"cutoff_hz", r.cutoff_hz},
                {"heldout_sse_removed_per_joint", list(r.sse_removed_per_joint)},
                {"heldout_sse_removed_learned", r.heldout_sse_removed_learned},
                {"splits", splits},
@@ -257,9 +297,21 @@ void RegisterDiagnoseCommand(CLI::App& app) {
       "diagnose", "Compare a simulation model with measured data: errors, named causes, extended model, gain");
   auto o = std::make_shared<DiagnoseOptions>();
   AddCommonOptions(command, o->common);
-  command->add_option("--model", o->model, "Simulation model")
+  command->add_option("--model", o->model,
+                      "Simulation model: pendulum, cartpole, double-pendulum, arm2, panda, or an "
+                      "extended-physics file (a diagnosis fed back: its effects stay, only what is missing is named)")
       ->required()
-      ->check(CLI::IsMember({"pendulum", "cartpole", "double-pendulum", "arm2", "panda"}));
+      ->check(CLI::Validator(
+          [](std::string& m) -> std::string {
+            if (IsAnalyticName(m)) return {};
+            try {
+              CheckInputPath(m, false);
+            } catch (const Error& e) {
+              return e.what();
+            }
+            return {};
+          },
+          "NAME|FILE"));
   command->add_option("--measured", o->measured,
                       "Joint-space CSV (t,q1..,qd1..,tau1..[,qdd1..]) or a dataset folder of shared/data")
       ->check(InputPath(true))
@@ -270,7 +322,7 @@ void RegisterDiagnoseCommand(CLI::App& app) {
   command->add_option("--out", o->out, "Output folder (report.md, extended_model.json, plots)")
       ->check(OutputPath(true))->required();
   command->add_option("--cutoff-hz", o->pipeline.cutoff_hz,
-                      "Zero-phase smoothing cutoff (Hz, at most 10; default 0: chosen by cross-validation)")
+                      "Zero-phase smoothing cutoff (Hz, at most 10; default 0: min(10 Hz, sample rate / 4))")
       ->check(Bounded(0, 10));
   command->add_option("--holdout", o->pipeline.holdout_fraction, "Held-out fraction at the end (in time)")
       ->check(Bounded(0, 0.9));
@@ -283,8 +335,11 @@ void RegisterDiagnoseCommand(CLI::App& app) {
   command->add_option("--rollout-horizon", o->pipeline.rollout_horizon, "Rollout window (s)")
       ->check(Bounded(1e-3, 1e4));
   command->add_option("--min-effect-to-noise", o->pipeline.min_effect_to_noise,
-                      "Smallest named effect: torque RMS / sensor-noise RMS")
+                      "Smallest named effect: torque RMS / sensor-noise sigma")
       ->check(Bounded(0, 1e6));
+  command->add_option("--alpha", o->pipeline.alpha,
+                      "Family-wise error of the selection: chance of naming any absent effect")
+      ->check(Bounded(1e-12, 0.5));
   command->callback([o] { RunDiagnose(*o); });
 }
 

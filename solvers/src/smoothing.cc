@@ -33,8 +33,6 @@ SmoothedData SmoothJointData(const JointData& data, double cutoff_hz) {
   const bool has_qdd = data.qdd.rows() == n && data.qdd.cols() == count;
   const double s = out.sigma_t, reach = 4.0 * s;
 
-  Eigen::VectorXd noise_sum = Eigen::VectorXd::Zero(n);
-  int noise_count = 0;
   for (std::size_t seg = 0; seg + 1 < out.segment_bounds.size(); ++seg) {
     const int begin = out.segment_bounds[seg], end = out.segment_bounds[seg + 1];
     double last_row_time = -1e300;
@@ -66,11 +64,9 @@ SmoothedData SmoothJointData(const JointData& data, double cutoff_hz) {
                                : Eigen::VectorXd(data.qd.middleCols(lo, m) * beta);
       out.tau.col(k) = data.tau.middleCols(lo, m) * alpha;
       out.dtau.col(k) = data.tau.middleCols(lo, m) * beta;
-      // Interior samples: noise estimate and (decimated) fitting rows.
+      // Interior samples, decimated: the fitting rows.
       const bool interior = t0 - data.t[begin] >= 3 * s && data.t[end - 1] - t0 >= 3 * s;
       if (interior) {
-        noise_sum += (data.tau.col(k) - out.tau.col(k)).array().square().matrix();
-        ++noise_count;
         if (t0 >= last_row_time + 0.75 * s) {
           last_row_time = t0;
           out.rows.push_back(k);
@@ -83,7 +79,6 @@ SmoothedData SmoothJointData(const JointData& data, double cutoff_hz) {
   DIFFDYN_CHECK(out.rows.size() >= 10, data.path, ": only ", out.rows.size(),
                 " usable samples after smoothing at --cutoff-hz ", cutoff_hz,
                 " (the record is too short for this cutoff)");
-  out.tau_noise = (noise_sum / std::max(1, noise_count)).array().sqrt().matrix();
   return out;
 }
 

@@ -224,6 +224,36 @@ TEST(Params, ParseOverridesAndNamesTheOption) {
   EXPECT_THROW(MakeAnalyticModel("robot"), Error);
 }
 
+// A params file takes every parameter, a vector one as [x, y, z] or by components.
+TEST(Params, FileTakesVectorParametersAsArrays) {
+  const auto panda = MakeAnalyticModel("panda");
+  const std::string path = ::testing::TempDir() + "/panda_params.json";
+  {
+    std::ofstream out(path);
+    out << R"({"tool_mass": 0.5, "tool_com": [0.01, 0.02, 0.1]})";
+  }
+  const Eigen::VectorXd p = ReadParamsFile(*panda, path);
+  EXPECT_DOUBLE_EQ(p[panda->ParamIndex("tool_mass")], 0.5);
+  EXPECT_DOUBLE_EQ(p[panda->ParamIndex("tool_com_y")], 0.02);
+  {
+    std::ofstream out(path);
+    out << R"({"tool_com": [0.01, 0.02]})";
+  }
+  EXPECT_THROW(ReadParamsFile(*panda, path), Error);
+}
+
+TEST(Effects, EveryParameterHasAnAdmissibleRange) {
+  for (const EffectKindInfo& info : AllEffectKinds()) {
+    ASSERT_EQ(info.lower.size(), info.params.size()) << info.name;
+    ASSERT_EQ(info.upper.size(), info.params.size()) << info.name;
+    for (std::size_t i = 0; i < info.params.size(); ++i) {
+      EXPECT_LT(info.lower[i], info.upper[i]) << info.name;
+      EXPECT_GE(info.neutral[i], info.lower[i]) << info.name;
+      EXPECT_LE(info.neutral[i], info.upper[i]) << info.name;
+    }
+  }
+}
+
 // Every per-joint effect's torque matches its table entry and the extended
 // forward dynamics inverts the extended joint torque.
 TEST(Effects, ExtendedModelForwardInvertsJointTorque) {

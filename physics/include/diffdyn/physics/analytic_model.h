@@ -410,7 +410,8 @@ inline Eigen::VectorXd ParseParams(const AnalyticModel& model,
 
 /// p from `p` (default: the model's defaults) overridden by the JSON file at
 /// `path`, an object {name: value} or {"params": {name: value}} with the names
-/// and limits of ParseParams. Throws diffdyn::Error "<path>: ..." (one line).
+/// and limits of ParseParams; a vector parameter is {name: [x, y, z]} or its
+/// three components. Throws diffdyn::Error "<path>: ..." (one line).
 inline Eigen::VectorXd ReadParamsFile(const AnalyticModel& model, const std::string& path,
                                       Eigen::VectorXd p = Eigen::VectorXd()) {
   nlohmann::json j = ReadJsonFile(path);
@@ -418,7 +419,15 @@ inline Eigen::VectorXd ReadParamsFile(const AnalyticModel& model, const std::str
   DIFFDYN_CHECK(j.is_object(), path, ": expected an object {name: value}");
   std::vector<std::string> assignments;
   for (const auto& [name, value] : j.items()) {
-    DIFFDYN_CHECK(value.is_number(), path, ": '", name.substr(0, 40), "' is not a number");
+    // A vector parameter (name_x, name_y, name_z) may be given as [x, y, z].
+    if (value.is_array() && value.size() == 3 && value[0].is_number() && value[1].is_number() &&
+        value[2].is_number()) {
+      assignments.push_back(StrCat(name, "=", value[0].get<double>(), ",", value[1].get<double>(), ",",
+                                   value[2].get<double>()));
+      continue;
+    }
+    DIFFDYN_CHECK(value.is_number(), path, ": '", name.substr(0, 40),
+                  "' is not a number (or [x, y, z] for a vector parameter)");
     assignments.push_back(StrCat(name, "=", value.get<double>()));
   }
   try {

@@ -27,6 +27,7 @@
 // JointTorque(q, qd, qdd) = k tau for qdd, for rollouts and simulation.
 #pragma once
 
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -67,22 +68,30 @@ struct EffectKindInfo {
   std::vector<std::string> units;    ///< units on a revolute joint
   std::vector<std::string> prismatic_units;  ///< units on a prismatic joint
   std::vector<double> neutral;       ///< parameter values that make the effect vanish
+  std::vector<double> lower;         ///< admissible range of each parameter: lower bound
+  std::vector<double> upper;         ///< admissible range of each parameter: upper bound
 };
+
+/// No bound on a parameter.
+inline constexpr double kUnbounded = std::numeric_limits<double>::infinity();
 
 /// Every effect kind, in a fixed order.
 inline const std::vector<EffectKindInfo>& AllEffectKinds() {
+  // Admissible ranges: friction, viscosity, inertia and mass are non-negative;
+  // a gain within a factor of 2; a delay of at most 0.1 s.
+  constexpr double inf = kUnbounded;
   static const std::vector<EffectKindInfo> kinds = {
-      {EffectKind::kViscous, "viscous", true, {"b"}, {"N m s/rad"}, {"N s/m"}, {0.0}},
-      {EffectKind::kCoulomb, "coulomb", true, {"F_c"}, {"N m"}, {"N"}, {0.0}},
+      {EffectKind::kViscous, "viscous", true, {"b"}, {"N m s/rad"}, {"N s/m"}, {0.0}, {0.0}, {inf}},
+      {EffectKind::kCoulomb, "coulomb", true, {"F_c"}, {"N m"}, {"N"}, {0.0}, {0.0}, {inf}},
       {EffectKind::kStribeck, "stribeck", true, {"F_c", "F_s", "v_s"},
-       {"N m", "N m", "rad/s"}, {"N", "N", "m/s"}, {0.0, 0.0, 0.1}},
-      {EffectKind::kOffset, "offset", true, {"tau_0"}, {"N m"}, {"N"}, {0.0}},
-      {EffectKind::kSpring, "spring", true, {"k"}, {"N m/rad"}, {"N/m"}, {0.0}},
-      {EffectKind::kArmature, "armature", true, {"I_a"}, {"kg m^2"}, {"kg"}, {0.0}},
-      {EffectKind::kGain, "gain", false, {"k"}, {"1"}, {"1"}, {1.0}},
-      {EffectKind::kDelay, "delay", false, {"d"}, {"s"}, {"s"}, {0.0}},
-      {EffectKind::kPayload, "payload", false, {"mass"}, {"kg"}, {"kg"}, {0.0}},
-      {EffectKind::kResidual, "residual", false, {}, {}, {}, {}},
+       {"N m", "N m", "rad/s"}, {"N", "N", "m/s"}, {0.0, 0.0, 0.1}, {0.0, 0.0, 1e-3}, {inf, inf, inf}},
+      {EffectKind::kOffset, "offset", true, {"tau_0"}, {"N m"}, {"N"}, {0.0}, {-inf}, {inf}},
+      {EffectKind::kSpring, "spring", true, {"k"}, {"N m/rad"}, {"N/m"}, {0.0}, {-inf}, {inf}},
+      {EffectKind::kArmature, "armature", true, {"I_a"}, {"kg m^2"}, {"kg"}, {0.0}, {0.0}, {inf}},
+      {EffectKind::kGain, "gain", false, {"k"}, {"1"}, {"1"}, {1.0}, {0.5}, {2.0}},
+      {EffectKind::kDelay, "delay", false, {"d"}, {"s"}, {"s"}, {0.0}, {0.0}, {0.1}},
+      {EffectKind::kPayload, "payload", false, {"mass"}, {"kg"}, {"kg"}, {0.0}, {0.0}, {inf}},
+      {EffectKind::kResidual, "residual", false, {}, {}, {}, {}, {}, {}},
   };
   return kinds;
 }
@@ -209,6 +218,18 @@ class ExtendedModel {
         if (stderrs.size() == theta.size()) e.stderrs[i] = stderrs[k];
       }
     }
+    return ExtendedModel(model_, params_, std::move(effects), residual_);
+  }
+
+  /// A copy with the nominal model's parameters replaced (its param_specs() size).
+  ExtendedModel WithNominalParams(Eigen::VectorXd params) const {
+    return ExtendedModel(model_, std::move(params), effects_, residual_);
+  }
+
+  /// A copy with `more` effects appended.
+  ExtendedModel WithMoreEffects(const std::vector<Effect>& more) const {
+    std::vector<Effect> effects = effects_;
+    effects.insert(effects.end(), more.begin(), more.end());
     return ExtendedModel(model_, params_, std::move(effects), residual_);
   }
 

@@ -47,7 +47,6 @@ struct SmoothedData {
   std::vector<int> rows;            ///< decimated interior sample indices
   std::vector<int> kernel_begin;    ///< per row: first sample of its window
   std::vector<Eigen::VectorXd> kernel_alpha;  ///< per row: the alpha weights
-  Eigen::VectorXd tau_noise;        ///< n: RMS of tau_raw - tau (sensor-noise estimate)
 
   int dof() const { return static_cast<int>(q.rows()); }
   /// Independent samples per second of smoothed noise, 1 / (2 sqrt(pi) s).
@@ -59,6 +58,15 @@ struct SmoothedData {
   void StateAt(const T& time, int segment, Eigen::Matrix<T, Eigen::Dynamic, 1>& q_out,
                Eigen::Matrix<T, Eigen::Dynamic, 1>& qd_out,
                Eigen::Matrix<T, Eigen::Dynamic, 1>& qdd_out) const;
+  /// The kernel average sum_i alpha_i f(qd_raw(joint, i)) over row `r`'s window
+  /// (r indexes `rows`): a function of the raw velocity smoothed like the data.
+  template <typename T, typename F>
+  T KernelAverage(int r, int joint, F&& f) const {
+    const Eigen::VectorXd& alpha = kernel_alpha[r];
+    T acc = T(0.0);
+    for (int i = 0; i < alpha.size(); ++i) acc += alpha[i] * f(qd_raw(joint, kernel_begin[r] + i));
+    return acc;
+  }
   /// First and one-past-last samples of each segment.
   std::vector<int> segment_bounds;  ///< size segments + 1
 };

@@ -1,0 +1,60 @@
+// diffdyn diagnose end to end: the JSON contract (noise_std, not_identifiable),
+// and an extended model fed back through --model, which has nothing missing.
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "run_diffdyn.h"
+
+namespace diffdyn {
+namespace {
+
+using testing::RunDiffdyn;
+using testing::TempPath;
+
+nlohmann::json Json(const testing::CommandResult& r) {
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  return nlohmann::json::parse(r.out);
+}
+
+// A pendulum with hidden viscous friction: diagnose names it; fed back on a
+// fresh record of the same plant, the extended model has nothing missing.
+TEST(Diagnose, AnExtendedModelFedBackHasNothingMissing) {
+  const std::string a = TempPath("diag_fed_a.csv"), b = TempPath("diag_fed_b.csv");
+  for (const auto& [file, seed] : {std::pair{a, 5}, std::pair{b, 6}}) {
+    ASSERT_EQ(RunDiffdyn("collect --system pendulum --effect viscous:1=0.2 --trajectories 20 --quiet --seed " +
+                         std::to_string(seed) + " --out " + file)
+                  .exit_code,
+              0);
+  }
+  const std::string first = TempPath("diag_fed_first"), second = TempPath("diag_fed_second");
+  const auto j = Json(RunDiffdyn("diagnose --model pendulum --measured " + a + " --json --out " + first));
+  bool viscous = false;
+  for (const auto& e : j.at("named_effects")) {
+    if (e.at("kind") == "viscous") viscous = std::abs(e.at("value").get<double>() - 0.2) < 0.03;
+    if (e.at("value").is_number()) {
+      EXPECT_GE(e.at("value").get<double>(), 0.0) << e.dump();
+    }
+  }
+  EXPECT_TRUE(viscous) << j.at("named_effects").dump();
+  ASSERT_EQ(j.at("noise_std").size(), 1u);
+  EXPECT_GT(j.at("noise_std")[0].get<double>(), 0.0);
+  EXPECT_TRUE(j.at("not_identifiable").is_array());
+
+  const auto k = Json(RunDiffdyn("diagnose --model " + first + "/extended_model.json --measured " + b +
+                                 " --json --out " + second));
+  EXPECT_TRUE(k.at("no_significant_discrepancy").get<bool>()) << k.at("named_effects").dump();
+  EXPECT_TRUE(k.at("named_effects").empty());
+  EXPECT_LT(k.at("heldout_sse_removed").get<double>(), 0.05);
+}
+
+TEST(Diagnose, RefusesAModelThatIsNeitherANameNorAFile) {
+  const auto r = RunDiffdyn("diagnose --model robot --measured " + std::string(DIFFDYN_SHARED_DATA_DIR) +
+                            "/panda_gaz2019_traj1 --out " + TempPath("diag_refused"));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_NE(r.err.find("--model"), std::string::npos) << r.err;
+}
+
+}  // namespace
+}  // namespace diffdyn
