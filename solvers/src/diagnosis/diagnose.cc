@@ -1,6 +1,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <optional>
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/physics/panda_dynamics.h"
@@ -66,6 +67,52 @@ bool BackToAbsent(const Effect& e) {
   return true;
 }
 
+// n_eff sum_j log(SSE_j / rows) of `ext` on the train rows.
+double TrainDeviance(const PreparedData& prep, const ExtendedModel& ext) {
+  const Eigen::VectorXd sse = RowSse(prep, PredictAll(prep, ext), prep.train);
+  double d = 0;
+  for (int j = 0; j < prep.n; ++j) d += prep.n_eff * std::log(sse[j] / prep.train.size() + 1e-300);
+  return d;
+}
+
+// Backward check after the joint refit (the selection saw linearised effects, e.g.
+// a long delay's first-order term): while some added effect is not significant
+// at `alpha` against the refit without it (likelihood ratio), the least
+// significant one is dropped and the rest refitted.
+ExtendedModel DropInsignificant(const PreparedData& prep, ExtendedModel ext, const Eigen::VectorXd& inv_sigma,
+                                double alpha, DiagnosisResult* result) {
+  const double inflation = prep.train.size() / prep.n_eff;
+  const std::size_t known = prep.nominal->effects().size();
+  while (ext.effects().size() > known + 1) {
+    const double full = TrainDeviance(prep, ext);
+    double worst_p = -1;
+    std::size_t worst = 0;
+    std::optional<ExtendedModel> without_worst;
+    for (std::size_t i = known; i < ext.effects().size(); ++i) {
+      std::vector<Effect> rest(ext.effects().begin() + static_cast<std::ptrdiff_t>(known), ext.effects().end());
+      rest.erase(rest.begin() + static_cast<std::ptrdiff_t>(i - known));
+      const ExtendedModel without =
+          RefitEffects(prep, prep.nominal->WithMoreEffects(rest), prep.train, inv_sigma, inflation);
+      const double p = ChiSquareSurvival(TrainDeviance(prep, without) - full,
+                                         static_cast<int>(ext.effects()[i].params.size()));
+      if (p > worst_p) {
+        worst_p = p;
+        worst = i;
+        without_worst = without;
+      }
+    }
+    if (worst_p < alpha) break;
+    SelectionStep step;
+    step.candidate = EffectLabel(ext.effects()[worst]);
+    step.p_value = worst_p;
+    step.threshold = alpha;
+    step.reason = StrCat("dropped: after the joint refit it is not significant (p = ", worst_p, ")");
+    result->steps.push_back(step);
+    ext = *without_worst;
+  }
+  return ext;
+}
+
 // The refit of the selected effects; an effect the joint refit returns to
 // absent is dropped (logged) and the rest refitted once more.
 ExtendedModel RefitSelected(const PreparedData& prep, const ExtendedModel& extended, const Eigen::VectorXd& inv_sigma,
@@ -110,7 +157,10 @@ ExtendedModel NameEffects(const PreparedData& prep, const JointData& data, const
   const std::vector<int> chosen = ForwardSelect(selection, select, &result->steps);
   ExtendedModel extended = prep.nominal->WithMoreEffects(selection.Effects(chosen));
   *inv_sigma = (selection.Variance(chosen).array() + 1e-300).rsqrt().matrix();
-  if (options.refit && !chosen.empty()) extended = RefitSelected(prep, extended, *inv_sigma, result);
+  if (options.refit && !chosen.empty()) {
+    extended = DropInsignificant(prep, RefitSelected(prep, extended, *inv_sigma, result), *inv_sigma, options.alpha,
+                                 result);
+  }
   if (!data.has_tau && Wanted(options, EffectKind::kViscous)) {
     std::vector<int> joints;
     for (int j = 0; j < prep.n; ++j) {

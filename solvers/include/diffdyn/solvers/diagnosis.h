@@ -18,7 +18,8 @@
 //   refit        (refit.h) the named effects' parameters refitted jointly through
 //                the extended model (Ceres, bounded to the admissible ranges); an
 //                effect the joint refit puts within 3 standard errors of absent
-//                is dropped;
+//                is dropped, and so, one at a time, is any added effect whose
+//                likelihood-ratio test against the refit without it fails at alpha;
 //   dissipation  (dissipation.h) free motion without a torque sensor: viscous
 //                friction from the energy balance, by the same selection;
 //   gain         (gain.h) held-out SSE removed, beside a purely learned residual;
