@@ -8,12 +8,8 @@
 namespace diffdyn {
 namespace {
 
-bool IsFriction(EffectKind kind) {
-  return kind == EffectKind::kCoulomb || kind == EffectKind::kStribeck;
-}
-
 bool MovesWithVelocity(EffectKind kind) {
-  return kind == EffectKind::kViscous || IsFriction(kind) || kind == EffectKind::kArmature;
+  return kind == EffectKind::kViscous || IsFrictionKind(kind) || kind == EffectKind::kArmature;
 }
 
 // Column of a per-joint effect at unit parameter `unit` (theta = neutral + e_unit).
@@ -25,7 +21,7 @@ Eigen::MatrixXd JointColumn(const PreparedData& prep, EffectKind kind, int j, in
   Eigen::MatrixXd c = Eigen::MatrixXd::Zero(prep.n, prep.rows);
   for (int r = 0; r < prep.rows; ++r) {
     const int k = prep.Sample(r);
-    if (IsFriction(kind)) {
+    if (IsFrictionKind(kind)) {
       c(j, r) = sd.KernelAverage<double>(r, j, [&](double v) {
         return JointEffectTorque<double>(kind, theta.data(), 0.0, v, 0.0);
       });

@@ -165,8 +165,7 @@ ExtendedModel NameEffects(const PreparedData& prep, const JointData& data, const
     std::vector<int> joints;
     for (int j = 0; j < prep.n; ++j) {
       const bool has = std::any_of(extended.effects().begin(), extended.effects().end(), [&](const Effect& e) {
-        return e.joint == j + 1 && (e.kind == EffectKind::kViscous || e.kind == EffectKind::kCoulomb ||
-                                    e.kind == EffectKind::kStribeck);
+        return e.joint == j + 1 && (e.kind == EffectKind::kViscous || IsFrictionKind(e.kind));
       });
       if (!has) joints.push_back(j);
     }

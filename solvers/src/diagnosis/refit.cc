@@ -1,5 +1,7 @@
 #include "diffdyn/solvers/diagnosis/refit.h"
 
+#include "diffdyn/solvers/diagnosis/candidates.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -7,10 +9,6 @@
 
 namespace diffdyn {
 namespace {
-
-bool IsFriction(EffectKind kind) {
-  return kind == EffectKind::kCoulomb || kind == EffectKind::kStribeck;
-}
 
 // tau_hat at row r (header equation).
 template <typename T>
@@ -31,7 +29,7 @@ VectorX<T> PredictRow(const PreparedData& prep, const ExtendedModel& ext, const 
   VectorX<T> tau = ext.JointTorque<T>(q, qd, qdd, theta);
   for (int i = 0; i < static_cast<int>(ext.effects().size()); ++i) {
     const Effect& e = ext.effects()[i];
-    if (!IsFriction(e.kind)) continue;
+    if (!IsFrictionKind(e.kind)) continue;
     const int j = e.joint - 1;
     const T* th = theta.data() + ext.ParamOffset(i);
     const T zero(0.0);

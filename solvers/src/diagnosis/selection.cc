@@ -12,10 +12,6 @@
 namespace diffdyn {
 namespace {
 
-bool IsFriction(EffectKind kind) {
-  return kind == EffectKind::kCoulomb || kind == EffectKind::kStribeck;
-}
-
 int ParamsOf(const SelectionProblem& problem, const std::vector<int>& set) {
   int k = 0;
   for (int c : set) k += problem.NumParams(c);
@@ -174,7 +170,7 @@ LinearSelection::LinearSelection(const PreparedData& prep, const CandidateLibrar
 bool LinearSelection::Conflicts(int a, int b) const {
   const Candidate& x = lib_.candidates[a];
   const Candidate& y = lib_.candidates[b];
-  return x.joint == y.joint && x.joint > 0 && IsFriction(x.kind) && IsFriction(y.kind);
+  return x.joint == y.joint && x.joint > 0 && IsFrictionKind(x.kind) && IsFrictionKind(y.kind);
 }
 
 int LinearSelection::Simpler(int c) const {

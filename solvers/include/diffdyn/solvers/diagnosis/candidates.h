@@ -42,6 +42,12 @@ inline constexpr double kStribeckGrid[] = {0.015, 0.03, 0.06, 0.12, 0.25, 0.5};
 /// Columns more parallel than this cannot be separated by the data.
 inline constexpr double kCollinearCosine = 0.995;
 
+/// True for the friction laws whose torque is a smoothed function of the raw
+/// velocity (coulomb, stribeck): they are compared with the data as kernel averages.
+inline bool IsFrictionKind(EffectKind kind) {
+  return kind == EffectKind::kCoulomb || kind == EffectKind::kStribeck;
+}
+
 /// One candidate effect with its regressor columns.
 struct Candidate {
   EffectKind kind = EffectKind::kViscous;
