@@ -14,6 +14,7 @@
 #include <vector>
 
 #include <fmt/core.h>
+#include <fmt/ranges.h>
 
 #include "diffdyn/physics/model_registry.h"
 #include "diffdyn/solvers/diagnosis.h"
@@ -53,11 +54,11 @@ int main(int argc, char** argv) {
     const DiagnosisResult r = Diagnose(m, m->DefaultParams(), c.data, DiagnosisOptions{});
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     worst_seconds = std::max(worst_seconds, r.seconds);
-    std::string named;
+    std::vector<std::string> labels;
     for (const Effect& e : r.named_effects) {
-      named += (named.empty() ? "" : ", ") + EffectLabel(e) + (e.params.empty() ? "" : fmt::format("={:.4g}", e.params[0]));
+      labels.push_back(EffectLabel(e) + (e.params.empty() ? "" : fmt::format("={:.4g}", e.params[0])));
     }
-    if (named.empty()) named = "-";
+    const std::string named = labels.empty() ? "-" : fmt::format("{}", fmt::join(labels, ", "));
     if (control) {
       const bool clean = r.named_effects.empty();
       controls_clean += clean;

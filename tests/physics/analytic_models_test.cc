@@ -11,6 +11,7 @@
 #include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/physics/effects.h"
 #include "diffdyn/physics/model_registry.h"
+#include "diffdyn/physics/panda_dynamics.h"
 
 namespace diffdyn {
 namespace {
