@@ -1,0 +1,191 @@
+#!/usr/bin/env python3
+"""README tables written from the results they cite, and checked against them.
+
+A table in a README is generated from a CSV by a spec in an HTML comment just
+above it (invisible when the README is rendered):
+
+    <!-- table from results/summary.csv
+    | controller | swung up | cost mean |
+    |---|---|---|
+    controller=hjb: | HJB policy | **{successes}/{starts}** | {mean_cost:.2f} |
+    model=delan,seed=*: | median of seeds | | {sci(median(torque_mse))} |
+    -: | a number from elsewhere (named in the row) | 300/300 | 12.6 |
+    -->
+    ...the table, written by this script...
+    <!-- end table -->
+
+Spec lines: the first names the CSV (relative to the README); lines starting
+with `|` are the header (expressions there see every row); every other line is
+`FILTER: | cells |`.
+FILTER is `-` (a literal row, copied) or `column=value,...` (the CSV rows where
+each column equals its value; `*` takes any value). In the cells, `{expr}` or
+`{expr:format}` is a Python expression over the matched rows: with one row, a
+column name is its value (a number where it parses as one); with several, a
+list of the values, for median, mean, min, max, sum, len. sci(x, digits=3)
+writes 1.38e-4.
+
+    readme_tables.py --check README.md...   exit 1 and a diff if a table differs
+    readme_tables.py --write README.md...   rewrite the tables in place
+Bad specs and missing files or columns: `error: FILE:LINE: ...`, exit 2.
+"""
+import argparse
+import csv
+import difflib
+import math
+import re
+import statistics
+import sys
+from pathlib import Path
+
+BEGIN = re.compile(r"^<!-- table from (\S+)\s*$")
+END = "<!-- end table -->"
+
+
+class SpecError(Exception):
+    pass
+
+
+def parse_value(text):
+    try:
+        x = float(text)
+    except ValueError:
+        return text
+    if math.isfinite(x) and x == int(x) and re.fullmatch(r"[+-]?\d+", text.strip()):
+        return int(x)
+    return x
+
+
+def sci(x, digits=3):
+    """1.38e-4 style: `digits` significant digits, exponent without padding."""
+    if x == 0:
+        return "0"
+    mantissa, exponent = f"{x:.{digits - 1}e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
+FUNCTIONS = {
+    "median": statistics.median, "mean": statistics.fmean, "min": min, "max": max,
+    "sum": sum, "len": len, "sci": sci, "round": round, "abs": abs,
+}
+
+
+def read_csv(path):
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    return [{k: parse_value(v) for k, v in row.items()} for row in rows]
+
+
+def select(rows, flt, where):
+    chosen = rows
+    for clause in flt.split(","):
+        if "=" not in clause:
+            raise SpecError(f"{where}: filter '{flt}' is not column=value,...")
+        col, val = (s.strip() for s in clause.split("=", 1))
+        if rows and col not in rows[0]:
+            raise SpecError(f"{where}: no column '{col}' in the CSV")
+        if val != "*":
+            chosen = [r for r in chosen if str(r[col]) == val or r[col] == parse_value(val)]
+    if not chosen:
+        raise SpecError(f"{where}: no CSV row matches '{flt}'")
+    return chosen
+
+
+def render_cells(template, chosen, where):
+    if len(chosen) == 1:
+        names = dict(chosen[0])
+    else:
+        names = {k: [r[k] for r in chosen] for k in chosen[0]}
+    names.update(FUNCTIONS)
+
+    def one(match):
+        body = match.group(1)
+        expr, fmt = body, ""
+        m = re.fullmatch(r"(.*?):([<>^]?[+-]?#?0?\d*(?:\.\d+)?[a-z%]?)", body)
+        if m and m.group(2):
+            expr, fmt = m.group(1), m.group(2)
+        try:
+            value = eval(expr, {"__builtins__": {}}, names)  # the README's own spec
+            return format(value, fmt)
+        except Exception as e:  # noqa: BLE001 - reported with the place
+            raise SpecError(f"{where}: cannot evaluate {{{body}}}: {e}") from e
+
+    return re.sub(r"\{([^{}]+)\}", one, template)
+
+
+def render_table(spec_lines, csv_path, where_of):
+    rows = read_csv(csv_path)
+    out = []
+    for k, line in enumerate(spec_lines):
+        where = where_of(k)
+        if line.startswith("|"):
+            out.append(render_cells(line, rows, where) if rows else line)
+            continue
+        flt, sep, cells = line.partition(":")
+        if not sep or not cells.strip().startswith("|"):
+            raise SpecError(f"{where}: expected 'FILTER: | cells |' or a '|' header line")
+        flt, cells = flt.strip(), cells.strip()
+        out.append(cells if flt == "-" else render_cells(cells, select(rows, flt, where), where))
+    return out
+
+
+def process(readme):
+    """(old lines, new lines) of the README with every table regenerated."""
+    lines = readme.read_text().split("\n")
+    new, i = [], 0
+    while i < len(lines):
+        m = BEGIN.match(lines[i])
+        new.append(lines[i])
+        if not m:
+            i += 1
+            continue
+        start = i
+        close = next((j for j in range(i + 1, len(lines)) if lines[j].strip() == "-->"), None)
+        if close is None:
+            raise SpecError(f"{readme}:{start + 1}: table spec without a closing '-->'")
+        end = next((j for j in range(close + 1, len(lines)) if lines[j].strip() == END), None)
+        if end is None:
+            raise SpecError(f"{readme}:{start + 1}: table without '{END}'")
+        csv_path = readme.parent / m.group(1)
+        if not csv_path.is_file():
+            raise SpecError(f"{readme}:{start + 1}: {m.group(1)}: no such file")
+        spec = [s for s in lines[start + 1:close]]
+        table = render_table(spec, csv_path, lambda k: f"{readme}:{start + 2 + k}")
+        new.extend(lines[start + 1:close + 1])
+        new.extend(table)
+        new.append(lines[end])
+        i = end + 1
+    return lines, new
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    mode = parser.add_mutually_exclusive_group(required=True)
+    mode.add_argument("--check", action="store_true")
+    mode.add_argument("--write", action="store_true")
+    parser.add_argument("readmes", nargs="+", type=Path)
+    args = parser.parse_args()
+    differ = 0
+    for readme in args.readmes:
+        try:
+            if not readme.is_file():
+                raise SpecError(f"{readme}: no such file")
+            old, new = process(readme)
+        except (SpecError, OSError, csv.Error) as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        if old == new:
+            continue
+        if args.write:
+            readme.write_text("\n".join(new))
+            print(f"{readme}: tables rewritten")
+        else:
+            differ += 1
+            print(f"error: {readme}: a table disagrees with the results it cites "
+                  f"(scripts/readme_tables.py --write {readme} rewrites it)", file=sys.stderr)
+            sys.stderr.writelines(difflib.unified_diff(
+                [s + "\n" for s in old], [s + "\n" for s in new], str(readme), "from the results"))
+    return 1 if differ else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,80 @@
+#!/usr/bin/env python3
+"""scripts/readme_tables.py on a README it writes itself: a table that agrees
+passes; a changed result fails with a diff; --write repairs it; bad specs exit 2."""
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "readme_tables.py"
+
+README = """# Results
+
+<!-- table from results/scores.csv
+| model | seed | error |
+|---|---|---|
+model=a,seed=0: | A | {seed} | {sci(err)} |
+model=a,seed=*: | A, median | | **{sci(median(err))}** |
+model=b: | B | {seed} | {err:.2f} |
+-: | paper | | 0.5 |
+-->
+| model | seed | error |
+|---|---|---|
+| A | 0 | 1.38e-4 |
+| A, median | | **2.00e-4** |
+| B | 7 | 0.25 |
+| paper | | 0.5 |
+<!-- end table -->
+"""
+
+CSV = "model,seed,err\na,0,0.000138005\na,1,0.0002\na,2,0.0003\nb,7,0.25\n"
+
+
+def run(*args):
+    return subprocess.run([sys.executable, str(SCRIPT), *args], capture_output=True, text=True)
+
+
+def expect(cond, what):
+    if not cond:
+        print(f"FAILED: {what}")
+        sys.exit(1)
+
+
+def main():
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        (root / "results").mkdir()
+        readme, scores = root / "README.md", root / "results" / "scores.csv"
+        readme.write_text(README)
+        scores.write_text(CSV)
+        r = run("--check", str(readme))
+        expect(r.returncode == 0, f"an agreeing table passes (rc {r.returncode}: {r.stderr})")
+
+        scores.write_text(CSV.replace("b,7,0.25", "b,7,0.31"))
+        r = run("--check", str(readme))
+        expect(r.returncode == 1, "a changed result fails")
+        expect("-| B | 7 | 0.25 |" in r.stderr and "+| B | 7 | 0.31 |" in r.stderr, "the diff names the row")
+        expect(readme.read_text() == README, "--check leaves the README as it was")
+
+        r = run("--write", str(readme))
+        expect(r.returncode == 0 and "| B | 7 | 0.31 |" in readme.read_text(), "--write repairs the table")
+        expect(run("--check", str(readme)).returncode == 0, "the repaired table passes")
+
+        for bad, message in [
+            (README.replace("model=b:", "model=c:"), "no CSV row matches"),
+            (README.replace("model=b:", "colour=b:"), "no column 'colour'"),
+            (README.replace("{err:.2f}", "{erro:.2f}"), "cannot evaluate"),
+            (README.replace("<!-- end table -->\n", ""), "without '<!-- end table -->'"),
+            (README.replace("results/scores.csv", "results/none.csv"), "no such file"),
+        ]:
+            readme.write_text(bad)
+            r = run("--check", str(readme))
+            lines = r.stderr.strip().split("\n")
+            expect(r.returncode == 2 and len(lines) == 1 and lines[0].startswith("error: ") and
+                   message in lines[0], f"bad spec '{message}' -> one error line, exit 2 (got {r.returncode}: {r.stderr})")
+            expect(readme.read_text() == bad, "a bad spec leaves the README as it was")
+    print("readme_tables: all checks passed")
+
+
+if __name__ == "__main__":
+    main()
