@@ -14,7 +14,8 @@ above it (invisible when the README is rendered):
     ...the table, written by this script...
     <!-- end table -->
 
-Spec lines: the first names the CSV (relative to the README); lines starting
+Spec lines: the first names the CSV (relative to the README; several CSVs with
+the same columns, separated by spaces, give their rows in turn); lines starting
 with `|` are the header (expressions there see every row); every other line is
 `FILTER: | cells |`.
 FILTER is `-` (a literal row, copied) or `column=value,...` (the CSV rows where
@@ -37,7 +38,7 @@ import statistics
 import sys
 from pathlib import Path
 
-BEGIN = re.compile(r"^<!-- table from (\S+)\s*$")
+BEGIN = re.compile(r"^<!-- table from (\S+(?:\s+\S+)*)\s*$")
 END = "<!-- end table -->"
 
 
@@ -112,8 +113,8 @@ def render_cells(template, chosen, where):
     return re.sub(r"\{([^{}]+)\}", one, template)
 
 
-def render_table(spec_lines, csv_path, where_of):
-    rows = read_csv(csv_path)
+def render_table(spec_lines, csv_paths, where_of):
+    rows = [row for path in csv_paths for row in read_csv(path)]
     out = []
     for k, line in enumerate(spec_lines):
         where = where_of(k)
@@ -145,11 +146,12 @@ def process(readme):
         end = next((j for j in range(close + 1, len(lines)) if lines[j].strip() == END), None)
         if end is None:
             raise SpecError(f"{readme}:{start + 1}: table without '{END}'")
-        csv_path = readme.parent / m.group(1)
-        if not csv_path.is_file():
-            raise SpecError(f"{readme}:{start + 1}: {m.group(1)}: no such file")
-        spec = [s for s in lines[start + 1:close]]
-        table = render_table(spec, csv_path, lambda k: f"{readme}:{start + 2 + k}")
+        csv_paths = [readme.parent / name for name in m.group(1).split()]
+        for name, path in zip(m.group(1).split(), csv_paths):
+            if not path.is_file():
+                raise SpecError(f"{readme}:{start + 1}: {name}: no such file")
+        spec = lines[start + 1:close]
+        table = render_table(spec, csv_paths, lambda k: f"{readme}:{start + 2 + k}")
         new.extend(lines[start + 1:close + 1])
         new.extend(table)
         new.append(lines[end])

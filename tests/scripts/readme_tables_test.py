@@ -60,6 +60,15 @@ def main():
         expect(r.returncode == 0 and "| B | 7 | 0.31 |" in readme.read_text(), "--write repairs the table")
         expect(run("--check", str(readme)).returncode == 0, "the repaired table passes")
 
+        # Two CSVs with the same columns: their rows in turn.
+        (root / "results" / "more.csv").write_text("model,seed,err\nc,9,0.5\n")
+        two = README.replace("results/scores.csv", "results/scores.csv results/more.csv").replace(
+            "-: | paper | | 0.5 |", "model=c: | C | {seed} | {err} |").replace("| paper | | 0.5 |", "| C | 9 | 0.5 |")
+        readme.write_text(two)
+        scores.write_text(CSV)
+        r = run("--check", str(readme))
+        expect(r.returncode == 0, f"rows of a second CSV are found (rc {r.returncode}: {r.stderr})")
+
         for bad, message in [
             (README.replace("model=b:", "model=c:"), "no CSV row matches"),
             (README.replace("model=b:", "colour=b:"), "no column 'colour'"),
