@@ -22,8 +22,9 @@ FILTER is `-` (a literal row, copied) or `column=value,...` (the CSV rows where
 each column equals its value; `*` takes any value). In the cells, `{expr}` or
 `{expr:format}` is a Python expression over the matched rows: with one row, a
 column name is its value (a number where it parses as one); with several, a
-list of the values, for median, mean, min, max, sum, len. sci(x, digits=3)
-writes 1.38e-4.
+list of the values, for median, mean, min, max, sum, len; at(values, keys,
+key) is the value of the one row whose `keys` column equals key (a grid cell:
+at(val_loss, hidden, 32)). sci(x, digits=3) writes 1.38e-4.
 
     readme_tables.py --check README.md...   exit 1 and a diff if a table differs
     readme_tables.py --write README.md...   rewrite the tables in place
@@ -64,7 +65,18 @@ def sci(x, digits=3):
     return f"{mantissa}e{int(exponent)}"
 
 
+def at(values, keys, key):
+    """The one entry of `values` whose entry of `keys` equals `key` (rows of a filter)."""
+    if not isinstance(values, list):
+        values, keys = [values], [keys]
+    found = [v for v, k in zip(values, keys) if k == key]
+    if len(found) != 1:
+        raise ValueError(f"{len(found)} rows with key {key!r}")
+    return found[0]
+
+
 FUNCTIONS = {
+    "at": at,
     "median": statistics.median, "mean": statistics.fmean, "min": min, "max": max,
     "sum": sum, "len": len, "sci": sci, "round": round, "abs": abs,
 }

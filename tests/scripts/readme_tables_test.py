@@ -14,14 +14,14 @@ README = """# Results
 | model | seed | error |
 |---|---|---|
 model=a,seed=0: | A | {seed} | {sci(err)} |
-model=a,seed=*: | A, median | | **{sci(median(err))}** |
+model=a,seed=*: | A, median | {at(seed, err, 0.0003)} | **{sci(median(err))}** |
 model=b: | B | {seed} | {err:.2f} |
 -: | paper | | 0.5 |
 -->
 | model | seed | error |
 |---|---|---|
 | A | 0 | 1.38e-4 |
-| A, median | | **2.00e-4** |
+| A, median | 2 | **2.00e-4** |
 | B | 7 | 0.25 |
 | paper | | 0.5 |
 <!-- end table -->
