@@ -22,9 +22,9 @@ FILTER is `-` (a literal row, copied) or `column=value,...` (the CSV rows where
 each column equals its value; `*` takes any value). In the cells, `{expr}` or
 `{expr:format}` is a Python expression over the matched rows: with one row, a
 column name is its value (a number where it parses as one); with several, a
-list of the values, for median, mean, min, max, sum, len; at(values, keys,
-key) is the value of the one row whose `keys` column equals key (a grid cell:
-at(val_loss, hidden, 32)). sci(x, digits=3) writes 1.38e-4.
+list of the values, for median, mean, min, max, sum, len; at(values, column,
+value, ...) is the entry of the one row whose columns equal the values (a grid
+cell: at(val_loss, hidden, 32)). sci(x, digits=3) writes 1.38e-4.
 
     readme_tables.py --check README.md...   exit 1 and a diff if a table differs
     readme_tables.py --write README.md...   rewrite the tables in place
@@ -65,13 +65,17 @@ def sci(x, digits=3):
     return f"{mantissa}e{int(exponent)}"
 
 
-def at(values, keys, key):
-    """The one entry of `values` whose entry of `keys` equals `key` (rows of a filter)."""
-    if not isinstance(values, list):
-        values, keys = [values], [keys]
-    found = [v for v, k in zip(values, keys) if k == key]
+def at(values, *keys_and_values):
+    """The one entry of `values` in the row whose columns equal the given values:
+    at(val_loss, hidden, 32) or at(mse_j, seed, 1, loss, "f+J")."""
+    if len(keys_and_values) % 2:
+        raise ValueError("at(values, column, value, ...) takes column-value pairs")
+    pairs = [(c if isinstance(c, list) else [c], v)
+             for c, v in zip(keys_and_values[::2], keys_and_values[1::2])]
+    values = values if isinstance(values, list) else [values]
+    found = [x for i, x in enumerate(values) if all(c[i] == v for c, v in pairs)]
     if len(found) != 1:
-        raise ValueError(f"{len(found)} rows with key {key!r}")
+        raise ValueError(f"{len(found)} rows match {[v for _, v in pairs]}")
     return found[0]
 
 
@@ -117,7 +121,7 @@ def render_cells(template, chosen, where):
         if m and m.group(2):
             expr, fmt = m.group(1), m.group(2)
         try:
-            value = eval(expr, {"__builtins__": {}}, names)  # the README's own spec
+            value = eval(expr, {"__builtins__": {}, **names})  # the README's own spec
             return format(value, fmt)
         except Exception as e:  # noqa: BLE001 - reported with the place
             raise SpecError(f"{where}: cannot evaluate {{{body}}}: {e}") from e
