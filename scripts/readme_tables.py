@@ -101,7 +101,7 @@ def select(rows, flt, where):
         if rows and col not in rows[0]:
             raise SpecError(f"{where}: no column '{col}' in the CSV")
         if val != "*":
-            chosen = [r for r in chosen if str(r[col]) == val or r[col] == parse_value(val)]
+            chosen = [r for r in chosen if r[col] == parse_value(val)]
     if not chosen:
         raise SpecError(f"{where}: no CSV row matches '{flt}'")
     return chosen
