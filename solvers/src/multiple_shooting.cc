@@ -17,13 +17,7 @@
 namespace diffdyn {
 
 TaskStep::TaskStep(const ControlTask& task)
-    : task_(task),
-      model_(task.plant.Model()),
-      p_(ParseParams(*model_, task.plant.params)),
-      actuated_(TaskActuatedJoints(task)),
-      damping_(TaskDamping(task)),
-      plant_(TaskModel(task, task.period, kSubsteps)),
-      workspace_(plant_->MakeWorkspace(1)) {}
+    : plant_(TaskModel(task, task.period, kSubsteps)), workspace_(plant_->MakeWorkspace(1)) {}
 
 TaskStep::~TaskStep() = default;
 
@@ -35,27 +29,10 @@ Eigen::VectorXd TaskStep::Value(const Eigen::VectorXd& x, const Eigen::VectorXd&
 
 Eigen::VectorXd TaskStep::Jacobians(const Eigen::VectorXd& x, const Eigen::VectorXd& u,
                                     Eigen::MatrixXd* fx, Eigen::MatrixXd* fu) const {
-  const int n = static_cast<int>(x.size()), m = static_cast<int>(u.size());
-  fx->resize(n, n);
-  fu->resize(n, m);
-  Eigen::VectorXd next(n);
-  // kDiagJetSize inputs of z = (x, u) seeded per pass.
-  for (int first = 0; first < n + m; first += kDiagJetSize) {
-    VectorX<DiagJet> xj = x.cast<DiagJet>(), uj = u.cast<DiagJet>();
-    for (int k = 0; k < kDiagJetSize && first + k < n + m; ++k) {
-      const int i = first + k;
-      (i < n ? xj[i] : uj[i - n]).v[k] = 1.0;
-    }
-    auto system = [&](const VectorX<DiagJet>& state, VectorX<DiagJet>& dxdt, double) {
-      dxdt = model_->Dynamics(p_, actuated_, damping_, state, uj);
-    };
-    IntegrateFixedSteps(Method::kRk4Classic, system, xj, 0.0, task_.period, kSubsteps);
-    for (int r = 0; r < n; ++r) next[r] = xj[r].a;
-    for (int k = 0; k < kDiagJetSize && first + k < n + m; ++k) {
-      const int i = first + k;
-      for (int r = 0; r < n; ++r) (i < n ? (*fx)(r, i) : (*fu)(r, i - n)) = xj[r].v[k];
-    }
-  }
+  Eigen::MatrixXd jac;
+  const Eigen::VectorXd next = plant_->Jacobian(x, u, &jac);
+  *fx = jac.leftCols(x.size());
+  *fu = jac.rightCols(u.size());
   return next;
 }
 

@@ -139,6 +139,42 @@ TEST_P(AnySystem, GradientsMatchJetsAndFiniteDifferences) {
   }
 }
 
+// TransitionModel::Jacobian [dF/dx, dF/du] against central differences of the
+// batched path (every column) and against reverse mode (Backward: c^T dF/dx).
+TEST_P(AnySystem, JacobianMatchesDifferencesAndReverseMode) {
+  const LearnedModel model = LearnedModel::Initialized(ConfigOf(GetParam()), 8);
+  const TransitionModel& any = model;
+  ASSERT_TRUE(any.differentiable());
+  const int n = model.state_size(), m = model.action_size();
+  Rng rng(9);
+  const Eigen::VectorXd x = 2.0 * Normal(n, 1, rng), u = Normal(m, 1, rng), c = Normal(n, 1, rng);
+  Eigen::MatrixXd jac;
+  const Eigen::VectorXd value = any.Jacobian(x, u, &jac);
+  ASSERT_EQ(jac.rows(), n);
+  ASSERT_EQ(jac.cols(), n + m);
+  auto ws = model.MakeWorkspace(1);
+  Eigen::MatrixXd next(n, 1);
+  model.PredictBatch(x, u, next, *ws);
+  EXPECT_LT((value - next.col(0)).cwiseAbs().maxCoeff(), 1e-12);
+  const double eps = 1e-6;
+  for (int k = 0; k < n + m; ++k) {
+    Eigen::VectorXd xp = x, xm = x, up = u, um = u;
+    (k < n ? xp[k] : up[k - n]) += eps;
+    (k < n ? xm[k] : um[k - n]) -= eps;
+    Eigen::MatrixXd fp(n, 1), fm(n, 1);
+    model.PredictBatch(xp, up, fp, *ws);
+    model.PredictBatch(xm, um, fm, *ws);
+    const Eigen::VectorXd fd = (fp - fm) / (2 * eps);
+    EXPECT_LT((jac.col(k) - fd).cwiseAbs().maxCoeff(), 1e-6 * std::max(1.0, fd.norm())) << "column " << k;
+  }
+  Eigen::MatrixXd dl_dx;
+  model.Forward(x, u, next, *ws);
+  model.Backward(c, *ws, nullptr, &dl_dx);
+  const Eigen::VectorXd expected = jac.leftCols(n).transpose() * c;
+  EXPECT_LT((dl_dx.col(0) - expected).cwiseAbs().maxCoeff(), 1e-9 * std::max(1.0, expected.norm()));
+  EXPECT_THROW(any.Jacobian(Eigen::VectorXd::Zero(n + 1), u, &jac), Error);
+}
+
 // With the angle seen as (sin, cos), shifting it by 2 pi changes no prediction but
 // the angle itself, and that by a whole turn (0 for abs-nn, 2 pi for the others).
 TEST_P(AnySystem, PeriodicInTheEncodedAngle) {

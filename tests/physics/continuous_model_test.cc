@@ -18,8 +18,6 @@
 namespace diffdyn {
 namespace {
 
-using Jet = ceres::Jet<double, 6>;
-
 template <typename Model>
 ContinuousTransitionModel<AnalyticDynamics<Model>> Adapted(ContinuousOptions options) {
   const AnalyticModelAdapter<Model> runtime;
@@ -27,16 +25,15 @@ ContinuousTransitionModel<AnalyticDynamics<Model>> Adapted(ContinuousOptions opt
       AnalyticDynamics<Model>{}, AnalyticSystem(runtime), runtime.DefaultParams(), options, Model::kName);
 }
 
-// Jacobian [dF/dx, dF/du] (n x (n + m)) of one transition by Jets.
-template <typename M>
-Eigen::MatrixXd JetJacobian(const M& model, const Eigen::VectorXd& x, const Eigen::VectorXd& u) {
-  const int n = model.state_size(), m = model.action_size();
-  VectorX<Jet> xj(n), uj(m);
-  for (int i = 0; i < n; ++i) xj[i] = Jet(x[i], i);
-  for (int i = 0; i < m; ++i) uj[i] = Jet(u[i], n + i);
-  const VectorX<Jet> f = model.Predict(xj, uj);
-  Eigen::MatrixXd jac(n, n + m);
-  for (int i = 0; i < n; ++i) jac.row(i) = f[i].v.head(n + m).transpose();
+// Jacobian [dF/dx, dF/du] (n x (n + m)) of one transition through the generic
+// interface (TransitionModel::Jacobian, Jets), its value checked against PredictBatch.
+Eigen::MatrixXd JetJacobian(const TransitionModel& model, const Eigen::VectorXd& x, const Eigen::VectorXd& u) {
+  EXPECT_TRUE(model.differentiable());
+  Eigen::MatrixXd jac, next(model.state_size(), 1);
+  const Eigen::VectorXd value = model.Jacobian(x, u, &jac);
+  auto ws = model.MakeWorkspace(1);
+  model.PredictBatch(x, u, next, *ws);
+  EXPECT_LT((value - next.col(0)).cwiseAbs().maxCoeff(), 1e-12);
   return jac;
 }
 

@@ -53,6 +53,12 @@ TEST(LoadTransitionModel, OpensLearnedFilesAndTheOracle) {
   const auto oracle = LoadTransitionModel("oracle");
   EXPECT_EQ(oracle->kind(), "oracle");
   EXPECT_EQ(oracle->state_size(), 3);
+  // The ODE engine has no derivatives; the learned model does.
+  Eigen::MatrixXd jac;
+  EXPECT_FALSE(oracle->differentiable());
+  EXPECT_THROW(oracle->Jacobian(x, u, &jac), Error);
+  EXPECT_TRUE(loaded->differentiable());
+  EXPECT_LT((loaded->Jacobian(x, u, &jac) - Step(learned, x, u)).cwiseAbs().maxCoeff(), 1e-12);
 }
 
 TEST(LoadTransitionModel, AnalyticNamesIntegrateTheirDefaultModel) {
@@ -87,8 +93,16 @@ TEST(LoadTransitionModel, OpensTheExtendedPhysicsFileDiagnoseWrites) {
   // The adapter integrates the extended model's own forward dynamics.
   ExtendedDynamics dynamics(std::make_shared<const ExtendedModel>(extended));
   Eigen::VectorXd dxdt;
-  dynamics(x, u, Eigen::VectorXd(), 0.0, dxdt);
+  dynamics(Eigen::VectorXd(x), u, Eigen::VectorXd(), 0.0, dxdt);
   EXPECT_NEAR(dxdt[1], -0.8 * 2.0 / (1.0 * 0.5 * 0.5), 1e-12);  // -b qd / (m l^2) at q = 0
+  // Its Jacobian by Jets: d(qd_next)/d(qd) against central differences.
+  Eigen::MatrixXd jac;
+  ASSERT_TRUE(loaded->differentiable());
+  loaded->Jacobian(x, u, &jac);
+  const double eps = 1e-6;
+  const double fd = (Step(*loaded, x + Eigen::Vector2d(0, eps), u)[1] -
+                     Step(*loaded, x - Eigen::Vector2d(0, eps), u)[1]) / (2 * eps);
+  EXPECT_NEAR(jac(1, 1), fd, 1e-7);
 }
 
 TEST(LoadTransitionModel, ErrorsNameTheModel) {

@@ -31,6 +31,7 @@
 
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <variant>
 
@@ -152,6 +153,23 @@ class ContinuousTransitionModel final : public TransitionModel {
   }
 
   bool uses_intervals() const override { return true; }
+  /// Whether f can be evaluated on Jets (a functor templated on the scalar).
+  static constexpr bool kJetDynamics =
+      std::is_invocable_v<const Dynamics&, const VectorX<JetK<8>>&, const VectorX<JetK<8>>&,
+                          const VectorX<JetK<8>>&, double, VectorX<JetK<8>>&>;
+
+  bool differentiable() const override { return kJetDynamics; }
+
+  /// [dF/dx, dF/du] (n x (n + m)) by Jets through the same integration (Predict);
+  /// a functor on double only is not differentiable (TransitionModel::Jacobian throws).
+  Eigen::VectorXd Jacobian(const Eigen::Ref<const Eigen::VectorXd>& x, const Eigen::Ref<const Eigen::VectorXd>& u,
+                           Eigen::MatrixXd* jac) const override {
+    if constexpr (kJetDynamics) {
+      return JetJacobian([this](const auto& xj, const auto& uj) { return Predict(xj, uj); }, x, u, jac);
+    } else {
+      return TransitionModel::Jacobian(x, u, jac);
+    }
+  }
 
   /// F(x, u) for one sample (x: n, u: m entries) on any scalar (Jets for dF/dx, dF/du).
   template <typename DX, typename DU>

@@ -630,6 +630,14 @@ class LearnedModel final : public DifferentiableTransitionModel {
     }
   }
 
+  bool differentiable() const override { return true; }
+
+  /// [dF/dx, dF/du] (n x (n + m)) by Jets through the network (and a NeuralODE's solver).
+  Eigen::VectorXd Jacobian(const Eigen::Ref<const Eigen::VectorXd>& x, const Eigen::Ref<const Eigen::VectorXd>& u,
+                           Eigen::MatrixXd* jac) const override {
+    return JetJacobian([this](const auto& xj, const auto& uj) { return Predict(xj, uj); }, x, u, jac);
+  }
+
   /// F(x, u) for one sample (x: n, u: m entries) on any scalar (Jets for input
   /// derivatives).
   template <typename DX, typename DU>

@@ -36,6 +36,7 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/autodiff_ode/jacobian.h"
 #include "diffdyn/models/system_description.h"
 
 namespace diffdyn {
@@ -89,6 +90,23 @@ class TransitionModel {
   /// Whether PredictBatchOver integrates over the given intervals.
   virtual bool uses_intervals() const { return false; }
 
+  /// Whether Jacobian is available (the ODE-engine oracle has no derivatives).
+  virtual bool differentiable() const { return false; }
+
+  /// The Jacobian of one transition, jac = [dF/dx, dF/du] (n x (n + m), resized) at
+  /// x (n entries), u (m entries), exact to rounding (forward-mode Jets through the
+  /// model's own integration); returns F(x, u) (n). Throws diffdyn::Error for wrong
+  /// sizes or a model that is not differentiable(); diffdyn::NumericalError where the
+  /// prediction is not finite.
+  virtual Eigen::VectorXd Jacobian(const Eigen::Ref<const Eigen::VectorXd>& x,
+                                   const Eigen::Ref<const Eigen::VectorXd>& u,
+                                   Eigen::MatrixXd* jac) const {
+    (void)x;
+    (void)u;
+    (void)jac;
+    throw Error(StrCat(kind(), ": this model has no derivatives (it is not differentiable)"));
+  }
+
  protected:
   /// Checks the sizes of a PredictBatch call, naming them on failure.
   void CheckBatchSizes(const Eigen::Ref<const Eigen::MatrixXd>& states,
@@ -101,6 +119,24 @@ class TransitionModel {
                   ", actions ", actions.rows(), "x", actions.cols(), ", next ", next.rows(), "x",
                   next.cols(), "; expected ", state_size(), "xB, ", action_size(), "xB, ",
                   state_size(), "xB");
+  }
+
+  /// The Jacobian of F by forward-mode Jets, for models with a scalar-generic
+  /// `predict(x, u)` (VectorX<Jet> x of n and u of m entries -> VectorX<Jet> of n):
+  /// ceil((n + m) / 8) evaluations. Returns F(x, u); checks sizes and finiteness.
+  template <typename Predict>
+  Eigen::VectorXd JetJacobian(const Predict& predict, const Eigen::Ref<const Eigen::VectorXd>& x,
+                              const Eigen::Ref<const Eigen::VectorXd>& u, Eigen::MatrixXd* jac) const {
+    const int n = state_size(), m = action_size();
+    DIFFDYN_CHECK(x.size() == n && u.size() == m, kind(), ": Jacobian got x of ", x.size(), " and u of ",
+                  u.size(), " entries, expected ", n, " and ", m);
+    Eigen::VectorXd z(n + m), value;
+    z << x, u;
+    *jac = JacobianDynamic<8>([&](const auto& zj) { return predict(zj.head(n), zj.tail(m)); }, z, &value);
+    if (!value.allFinite() || !jac->allFinite()) {
+      throw NumericalError(StrCat(kind(), ": the Jacobian at this state and action is not finite"));
+    }
+    return value;
   }
 };
 

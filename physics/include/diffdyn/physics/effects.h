@@ -30,6 +30,7 @@
 #include <limits>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include <Eigen/Cholesky>
@@ -290,29 +291,40 @@ class ExtendedModel {
   /// `tau_measured` is the sensor torque already taken at t - d. JointTorque is
   /// linear in qdd without a residual network, so one Newton step from qdd = 0
   /// with the effective mass matrix (n + 1 JointTorque calls) is exact; with a
-  /// network (nonlinear in qdd) a second step is taken.
-  Eigen::VectorXd ForwardDynamics(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                                  const Eigen::VectorXd& tau_measured) const {
+  /// network (nonlinear in qdd) a second step is taken. T: double or DiagJet.
+  /// Throws diffdyn::NumericalError when the mass matrix is not positive definite
+  /// (on Jets the solution is then not finite).
+  template <typename T>
+  VectorX<T> ForwardDynamics(const VectorX<T>& q, const VectorX<T>& qd, const VectorX<T>& tau_measured) const {
     const int n = dof();
-    const Eigen::VectorXd theta = EffectParams();
-    const Eigen::VectorXd target = Gain<double>(theta) * tau_measured;
-    Eigen::VectorXd qdd = Eigen::VectorXd::Zero(n);
+    const VectorX<T> theta = EffectParams().template cast<T>();
+    const VectorX<T> target = Gain<T>(theta) * tau_measured;
+    VectorX<T> qdd = VectorX<T>::Zero(n);
     const int steps = residual_ ? 2 : 1;
     for (int step = 0; step < steps; ++step) {
-      const Eigen::VectorXd bias = JointTorque<double>(q, qd, qdd, theta);
-      Eigen::MatrixXd mass(n, n);
+      const VectorX<T> bias = JointTorque<T>(q, qd, qdd, theta);
+      MatrixX<T> mass(n, n);
       for (int i = 0; i < n; ++i) {
-        mass.col(i) =
-            JointTorque<double>(q, qd, qdd + Eigen::VectorXd::Unit(n, i), theta) - bias;
+        mass.col(i) = JointTorque<T>(q, qd, qdd + VectorX<T>::Unit(n, i), theta) - bias;
       }
-      const Eigen::LDLT<Eigen::MatrixXd> ldlt(0.5 * (mass + mass.transpose()));
-      if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
-        throw NumericalError(
-            StrCat(model_->name(), ": extended mass matrix is not positive definite"));
+      const MatrixX<T> symmetric = T(0.5) * (mass + mass.transpose());
+      if constexpr (std::is_same_v<T, double>) {
+        const Eigen::LDLT<Eigen::MatrixXd> ldlt(symmetric);
+        if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) {
+          throw NumericalError(StrCat(model_->name(), ": extended mass matrix is not positive definite"));
+        }
+        qdd += ldlt.solve(target - bias);
+      } else {
+        qdd += SpdSolve(symmetric, VectorX<T>(target - bias));
       }
-      qdd += ldlt.solve(target - bias);
     }
     return qdd;
+  }
+
+  /// ForwardDynamics on double.
+  Eigen::VectorXd ForwardDynamics(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                  const Eigen::VectorXd& tau_measured) const {
+    return ForwardDynamics<double>(q, qd, tau_measured);
   }
 
  private:
@@ -345,7 +357,7 @@ void IntegrateJointMotion(const ExtendedModel& model, const Torque& torque, doub
   qd = x.tail(n);
 }
 
-/// An extended model as continuous dynamics on double for ContinuousTransitionModel
+/// An extended model as continuous dynamics for ContinuousTransitionModel
 /// (models/continuous_model.h): x = (q, qd) (2n), u = tau_measured (n), no theta,
 ///
 ///   dx/dt = (qd, ExtendedModel::ForwardDynamics(q, qd, u)).
@@ -361,12 +373,13 @@ struct ExtendedDynamics {
                     "(the delay needs the past torque)");
     }
   }
-  void operator()(const Eigen::VectorXd& x, const Eigen::VectorXd& u, const Eigen::VectorXd&,
-                  double, Eigen::VectorXd& dxdt) const {
+  /// T: double, or DiagJet for the Jacobian of the transition.
+  template <typename T>
+  void operator()(const VectorX<T>& x, const VectorX<T>& u, const VectorX<T>&, double, VectorX<T>& dxdt) const {
     const int n = model->dof();
     dxdt.resize(2 * n);
     dxdt.head(n) = x.tail(n);
-    dxdt.tail(n) = model->ForwardDynamics(x.head(n), x.tail(n), u);
+    dxdt.tail(n) = model->template ForwardDynamics<T>(x.head(n), x.tail(n), u);
   }
   std::shared_ptr<const ExtendedModel> model;
 };

@@ -54,10 +54,9 @@
 
 namespace diffdyn {
 
-/// The task's plant over one control period, x_{k+1} = Phi(x, u) (n): values from the
-/// evaluator's plant (TaskModel, rk4-classic with 4 substeps), and the same step on
-/// Jets over AnalyticModel::Dynamics with its Jacobians fx = dPhi/dx (n x n) and
-/// fu = dPhi/du (n x m). Keeps a reference to the task; not thread-safe.
+/// The task's plant over one control period, x_{k+1} = Phi(x, u) (n): the evaluator's
+/// plant (TaskModel, rk4-classic with 4 substeps) with its Jacobians fx = dPhi/dx
+/// (n x n) and fu = dPhi/du (n x m) (TransitionModel::Jacobian). Not thread-safe.
 class TaskStep {
  public:
   explicit TaskStep(const ControlTask& task);
@@ -70,11 +69,6 @@ class TaskStep {
 
  private:
   static constexpr int kSubsteps = 4;  // the evaluator's plant (control.h)
-  const ControlTask& task_;
-  std::shared_ptr<const AnalyticModel> model_;
-  Eigen::VectorXd p_;
-  std::vector<int> actuated_;
-  Eigen::VectorXd damping_;
   std::unique_ptr<TransitionModel> plant_;
   std::unique_ptr<TransitionWorkspace> workspace_;
 };
