@@ -17,6 +17,6 @@ GIL released, on all cores unless `threads` says otherwise; results do not depen
 on the thread count. `diffdyn.torch_function` makes a model callable from PyTorch.
 """
 
-from ._diffdyn import Model, __version__, evaluate, load_model
+from ._diffdyn import Model, __version__, evaluate, load_model, train
 
-__all__ = ["Model", "evaluate", "load_model", "__version__"]
+__all__ = ["Model", "evaluate", "load_model", "train", "__version__"]

@@ -80,7 +80,10 @@ py::array Predict(const PyModel& m, const py::handle& x_in, const py::handle& u_
   DIFFDYN_CHECK(x.samples == u.samples && x.single == u.single, Name(m, "predict"), ": x has ", x.samples,
                 " samples, u has ", u.samples);
   py::array_t<double> dt;
-  if (!dt_in.is_none()) {
+  if (py::isinstance<py::float_>(dt_in) || py::isinstance<py::int_>(dt_in)) {
+    dt = NewArray({x.samples});  // one interval for every sample
+    std::fill(dt.mutable_data(), dt.mutable_data() + x.samples, dt_in.cast<double>());
+  } else if (!dt_in.is_none()) {
     dt = ReadArray(dt_in, 1, Name(m, "predict: dt"));
     DIFFDYN_CHECK(dt.size() == x.samples, Name(m, "predict: dt"), " has ", dt.size(), " entries for ", x.samples,
                   " samples");
@@ -221,7 +224,7 @@ or the ODE-engine pusher ("oracle"). Made by diffdyn.load_model.)doc")
       .def_property_readonly("differentiable", [](const PyModel& p) { return p.model().differentiable(); })
       .def("predict", &Predict, py::arg("x"), py::arg("u"), py::arg("dt") = py::none(), py::arg("threads") = 0,
            R"doc(Next states F(x, u): x (N, n), u (N, m) -> (N, n); one sample x (n,), u (m,) -> (n,).
-dt (N,): per-sample intervals in seconds for continuous-time models (others ignore it).
+dt: seconds per transition, (N,) or one number, for continuous-time models (others ignore it).
 float64 C-contiguous inputs are read in place; float32 in gives float32 out (computed in float64).)doc")
       .def("jacobian", &Jacobian, py::arg("x"), py::arg("u"), py::arg("threads") = 0,
            R"doc([dF/dx, dF/du] per sample, exact (forward-mode Jets): (N, n, n + m), or (n, n + m) for one sample.)doc")

@@ -1,16 +1,22 @@
 // The compiled part of the `diffdyn` Python package (diffdyn/__init__.py re-exports
-// it): models over numpy batches (model_bindings.cc), the evaluation `diffdyn eval
-// --json` prints, the library's version, and its errors as Python exceptions:
+// it): models over numpy batches (model_bindings.cc), the training and evaluation
+// `diffdyn train --json` and `diffdyn eval --json` print, the library's version, and its errors as Python exceptions:
 // diffdyn::Error (bad input) becomes ValueError with the command line's message,
 // diffdyn::NumericalError (a runtime failure) RuntimeError.
+#include <cstdint>
+#include <functional>
+#include <map>
 #include <string>
+#include <vector>
 
 #include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
 
 #include "arrays.h"
 #include "bindings.h"
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/solvers/model_evaluation.h"
+#include "diffdyn/solvers/model_training.h"
 #include "diffdyn/solvers/version.h"
 
 namespace diffdyn::python {
@@ -25,6 +31,80 @@ py::object Evaluate(const py::handle& model, const std::string& data, const std:
   {
     py::gil_scoped_release release;
     text = EvaluateFiles(request).dump();
+  }
+  return py::module_::import("json").attr("loads")(text);
+}
+
+// 1-based joints from a list.
+std::vector<int> Joints(const py::handle& value, const char* option) {
+  try {
+    return value.cast<std::vector<int>>();
+  } catch (const py::cast_error&) {
+    throw py::value_error(StrCat(option, ": expected a list of 1-based joint numbers"));
+  }
+}
+
+void SetActuated(TrainRequest& r, const py::handle& value) {
+  const bool text = py::isinstance<py::str>(value);
+  if (text && value.cast<std::string>() == "all") {
+    r.layout.all_actuated = true;
+  } else if (!text || value.cast<std::string>() != "auto") {
+    r.layout.actuated = Joints(value, "actuated");
+  }
+}
+
+void SetAngleFeatures(TrainRequest& r, const py::handle& value) {
+  const std::string features = value.cast<std::string>();
+  if (features != "sincos" && features != "raw") {
+    throw py::value_error("angle_features: expected 'sincos' or 'raw', got '" + features + "'");
+  }
+  r.layout.angle_features = features == "raw" ? AngleFeatures::kRaw : AngleFeatures::kSinCos;
+  r.angle_features_given = true;
+}
+
+// The keyword options of train, each setting its field of the request.
+using Setter = std::function<void(TrainRequest&, const py::handle&)>;
+const std::map<std::string, Setter>& TrainSetters() {
+  static const std::map<std::string, Setter> setters = {
+      {"solver", [](TrainRequest& r, const py::handle& v) { r.solver = v.cast<std::string>(); }},
+      {"steps", [](TrainRequest& r, const py::handle& v) { r.steps = v.cast<int>(); }},
+      {"loss", [](TrainRequest& r, const py::handle& v) { r.loss = v.cast<std::string>(); }},
+      {"gamma", [](TrainRequest& r, const py::handle& v) { r.gamma = v.cast<double>(); }},
+      {"val_fraction", [](TrainRequest& r, const py::handle& v) { r.val_fraction = v.cast<double>(); }},
+      {"threads", [](TrainRequest& r, const py::handle& v) { r.threads = v.cast<int>(); }},
+      {"patience", [](TrainRequest& r, const py::handle& v) { r.patience = v.cast<int>(); }},
+      {"normalize", [](TrainRequest& r, const py::handle& v) { r.normalize = v.cast<std::string>(); }},
+      {"seed", [](TrainRequest& r, const py::handle& v) { r.seed = v.cast<std::uint64_t>(); }},
+      {"progress", [](TrainRequest& r, const py::handle& v) { r.progress = v.cast<bool>(); }},
+      {"epochs", [](TrainRequest& r, const py::handle& v) { r.epochs = v.cast<int>(); }},
+      {"batch", [](TrainRequest& r, const py::handle& v) { r.batch = v.cast<int>(); }},
+      {"hidden", [](TrainRequest& r, const py::handle& v) { r.hidden = v.cast<int>(); }},
+      {"lr", [](TrainRequest& r, const py::handle& v) { r.lr = v.cast<double>(); }},
+      {"mass_epsilon", [](TrainRequest& r, const py::handle& v) { r.mass_epsilon = v.cast<double>(); }},
+      {"diagonal_floor", [](TrainRequest& r, const py::handle& v) { r.diagonal_floor = v.cast<double>(); }},
+      {"prismatic", [](TrainRequest& r, const py::handle& v) { r.layout.prismatic = Joints(v, "prismatic"); }},
+      {"actuated", SetActuated},
+      {"angle_features", SetAngleFeatures}};
+  return setters;
+}
+
+// The `train --json` summary; the model file is written to `out`.
+py::object Train(const std::string& data, const std::string& model, const std::string& out, const py::kwargs& kw) {
+  TrainRequest r{.data = data, .model = model, .out = out};
+  for (const auto& [key_handle, value] : kw) {
+    const std::string key = key_handle.cast<std::string>();
+    const auto setter = TrainSetters().find(key);
+    if (setter == TrainSetters().end()) throw py::value_error("train: unknown option '" + key + "'");
+    try {
+      setter->second(r, value);
+    } catch (const py::cast_error&) {
+      throw py::type_error(StrCat("train: option '", key, "' got a ", py::str(value.get_type()).cast<std::string>()));
+    }
+  }
+  std::string text;
+  {
+    py::gil_scoped_release release;
+    text = TrainFiles(r).dump();
   }
   return py::module_::import("json").attr("loads")(text);
 }
@@ -56,6 +136,12 @@ PYBIND11_MODULE(_diffdyn, m) {
         R"doc(The dictionary `diffdyn eval --model MODEL --data DATA --json` prints, from the same
 computation: MODEL is a path or name, or a diffdyn.Model (its spec is evaluated; continuous-time
 models take the data's median interval). solver / steps / substeps as the command's options.)doc");
+  m.def("train", &Train, py::arg("data"), py::arg("model") = "abs-nn", py::arg("out") = "model.json",
+        R"doc(Trains a model on the dataset file `data`, writes it to `out` and returns the dictionary
+`diffdyn train --json` prints, from the same function. Keyword options are the command's, in
+snake case: solver, steps, hidden, loss, epochs, lr, batch, val_fraction, gamma, threads,
+patience, normalize, seed, mass_epsilon, diagonal_floor, actuated ("auto", "all" or a list of
+1-based joints), prismatic (a list), angle_features ("sincos" or "raw"), progress (a bar on stderr).)doc");
   m.def("_input_copies", [] { return InputCopies().load(); },
         "How many input arrays were converted (copied) instead of read in place (for tests).");
 }

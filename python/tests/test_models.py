@@ -3,6 +3,7 @@ own paths: shapes, zero-copy inputs, thread-count independence, Jacobians agains
 central differences, rollouts against repeated predictions, errors as exceptions
 and the GIL released during native work."""
 
+import os
 import threading
 import time
 
@@ -46,6 +47,17 @@ def test_predict_is_per_sample_and_independent_of_threads():
         assert np.array_equal(model.predict(x[i], u[i]), one[i])
     # The pendulum swings under gravity: the state moved.
     assert np.abs(one - x).max() > 1e-3
+
+
+def test_predict_over_given_intervals():
+    model = pendulum(0.02)
+    x, u = batch(model, 4)
+    assert np.array_equal(model.predict(x, u, dt=0.02), model.predict(x, u))
+    longer = model.predict(x, u, dt=np.full(4, 0.04))
+    np.testing.assert_allclose(longer, pendulum(0.04).predict(x, u), rtol=0, atol=1e-12)
+    assert np.abs(longer - model.predict(x, u)).max() > 1e-3
+    with pytest.raises(ValueError, match="positive interval"):
+        model.predict(x, u, dt=np.zeros(4))
 
 
 def test_inputs_are_read_in_place_where_the_layout_allows():
@@ -162,3 +174,34 @@ def test_native_work_releases_the_gil():
     # worker's two clock readings.
     assert end - start > 0.02, "the call is too short to tell"
     assert inside >= 5, f"{inside} ticks during a {end - start:.3f} s native call"
+
+
+def test_train_returns_what_the_command_line_prints(pendulum_files, tmp_path):
+    data, _ = pendulum_files
+    options = ["--model", "res-node", "--epochs", "2", "--hidden", "12", "--seed", "4", "--loss", "multi"]
+    cli_path, py_path = str(tmp_path / "cli.json"), str(tmp_path / "py.json")
+    expected = cli_json("train", "--data", data, *options, "--quiet", "--out", cli_path)
+    summary = diffdyn.train(data, "res-node", out=py_path, epochs=2, hidden=12, seed=4, loss="multi")
+    timing = {"model_path", "seconds_per_epoch"}
+    assert {k: v for k, v in summary.items() if k not in timing} == \
+        {k: v for k, v in expected.items() if k not in timing}
+    assert summary["model_path"] == py_path and summary["epochs"] == 2
+    # The same weights: the two files predict the same bits.
+    x, u = batch(diffdyn.load_model(py_path), 20)
+    assert np.array_equal(diffdyn.load_model(py_path).predict(x, u), diffdyn.load_model(cli_path).predict(x, u))
+
+
+def test_train_refuses_bad_options(pendulum_files, tmp_path):
+    data, _ = pendulum_files
+    out = str(tmp_path / "m.json")
+    with pytest.raises(ValueError, match="unknown option 'epoch'"):
+        diffdyn.train(data, "abs-nn", out=out, epoch=3)
+    with pytest.raises(ValueError, match="--epochs must be >= 1"):
+        diffdyn.train(data, "abs-nn", out=out, epochs=0)
+    with pytest.raises(TypeError, match="epochs"):
+        diffdyn.train(data, "abs-nn", out=out, epochs="many")
+    with pytest.raises(ValueError, match="--model"):
+        diffdyn.train(data, "abs-ode", out=out)
+    with pytest.raises(ValueError, match="also an input"):
+        diffdyn.train(data, "abs-nn", out=data)
+    assert not os.path.exists(out)
