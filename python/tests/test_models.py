@@ -205,3 +205,33 @@ def test_train_refuses_bad_options(pendulum_files, tmp_path):
     with pytest.raises(ValueError, match="also an input"):
         diffdyn.train(data, "abs-nn", out=data)
     assert not os.path.exists(out)
+
+
+def test_two_python_threads_predict_at_once():
+    panda = diffdyn.load_model("panda", dt=0.004)
+    x, u = batch(panda, 200, 0.1)
+    small = pendulum()
+    xs, us = batch(small, 8)
+    span, finished = [], []
+
+    def long_call():
+        start = time.perf_counter()
+        panda.jacobian(x, u, threads=1)
+        span.extend([start, time.perf_counter()])
+
+    def short_calls():
+        while not span:
+            small.predict(xs, us, threads=1)
+            finished.append(time.perf_counter())
+
+    workers = [threading.Thread(target=long_call), threading.Thread(target=short_calls)]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join()
+    start, end = span
+    inside = sum(start < t < end for t in finished)
+    # Had the long call held the GIL, no other thread could have finished a call
+    # between its two clock readings.
+    assert end - start > 0.02, "the call is too short to tell"
+    assert inside >= 3, f"{inside} predictions finished during a {end - start:.3f} s jacobian call"
