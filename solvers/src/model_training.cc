@@ -17,8 +17,6 @@
 namespace diffdyn {
 namespace {
 
-bool IsDelan(const TrainRequest& r) { return r.model == "delan" || r.model == "delan-friction"; }
-
 // The ranges the command line's validators enforce, for callers without them.
 void CheckRequest(const TrainRequest& r) {
   std::error_code ec;
@@ -127,7 +125,7 @@ nlohmann::json TrainDelanFiles(const TrainRequest& r) {
 
 nlohmann::json TrainFiles(const TrainRequest& r) {
   CheckRequest(r);
-  if (IsDelan(r)) return TrainDelanFiles(r);
+  if (IsDelanKind(r.model)) return TrainDelanFiles(r);
   const Dataset dataset = ReadDataset(r.data, r.layout);
   const SampleIntervals dt = dataset.Intervals();
   LearnedModelConfig config;

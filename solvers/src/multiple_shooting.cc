@@ -11,7 +11,6 @@
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/integrate.h"
-#include "diffdyn/physics/analytic_model.h"
 #include "diffdyn/solvers/lqr.h"
 
 namespace diffdyn {

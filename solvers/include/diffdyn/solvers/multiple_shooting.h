@@ -17,7 +17,7 @@
 // Multiple shooting: the states x_1..x_K are parameters too (n each, x_0 held; bounded
 // by the task's finite state limits, as the cart-pole's track), with
 // the continuity defects as weighted residuals s (x_{k+1} - Phi(x_k, u_k)); Phi and its
-// Jacobians come from the project's RK4 on Jets (AnalyticModel::Dynamics). The weight s
+// Jacobians come from the plant (TaskModel's rk4-classic, TransitionModel::Jacobian). The weight s
 // rises tenfold per stage up to `final_weight`, each stage started from the last. A
 // warm start sets the states on a straight line from x0 to a copy of the goal over a
 // fraction of the run (then at the goal), with zero actions: for each periodic
