@@ -8,18 +8,8 @@
 
 namespace diffdyn::cli {
 
-std::filesystem::path PlotsDir() {
-  namespace fs = std::filesystem;
-  if (const char* env = std::getenv("DIFFDYN_PLOTS_DIR"); env != nullptr && *env != '\0') {
-    return env;
-  }
-  const fs::path source = fs::path(DIFFDYN_SOURCE_DIR) / "scripts" / "plots";
-  if (fs::is_directory(source)) return source;
-  return fs::path(DIFFDYN_INSTALL_DATADIR) / "plots";
-}
-
 bool RunPlotScript(const std::string& script, const std::vector<std::string>& args) {
-  const std::string path = (PlotsDir() / script).string();
+  const std::string path = (PlotScriptsDir() / script).string();
   std::vector<std::string> argv_storage = {DIFFDYN_PYTHON, path};
   argv_storage.insert(argv_storage.end(), args.begin(), args.end());
   std::vector<char*> argv;

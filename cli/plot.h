@@ -6,9 +6,9 @@
 //   diffdyn::cli::RunPlotScript("demo_fit.py", {csv_path, png_path});
 //
 // which runs `<python> <plots>/demo_fit.py <args...>` with the Python CMake found
-// (Debian's /usr/bin/python3, which has python3-matplotlib). The folder is found from
-// $DIFFDYN_PLOTS_DIR, else the source tree the binary was built from, else the
-// install prefix. A failing script is reported on stderr as one warning line
+// (Debian's /usr/bin/python3, which has python3-matplotlib). The folder is
+// PlotScriptsDir() (solvers/version.h): $DIFFDYN_PLOTS_DIR, else the source tree the
+// binary was built from, else the install prefix. A failing script is reported on stderr as one warning line
 // and returns false: the numbers (CSV, JSON) are written either way.
 #pragma once
 
@@ -16,12 +16,11 @@
 #include <string>
 #include <vector>
 
+#include "diffdyn/solvers/version.h"
+
 namespace diffdyn::cli {
 
-/// The folder holding the plot scripts (see the header comment for the search order).
-std::filesystem::path PlotsDir();
-
-/// Runs `<python> PlotsDir()/script args...`; true on success, else warns and returns false.
+/// Runs `<python> PlotScriptsDir()/script args...`; true on success, else warns and returns false.
 bool RunPlotScript(const std::string& script, const std::vector<std::string>& args);
 
 }  // namespace diffdyn::cli
