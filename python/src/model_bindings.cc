@@ -202,6 +202,16 @@ std::shared_ptr<PyModel> Load(const std::string& spec, double dt, const std::str
 
 }  // namespace
 
+std::shared_ptr<const TransitionModel> SharedModel(const py::handle& model, const std::string& what) {
+  if (!py::isinstance<PyModel>(model)) throw py::value_error(what + ": expected a diffdyn.Model");
+  const auto holder = model.cast<std::shared_ptr<PyModel>>();
+  return {holder, &holder->model()};  // shares ownership of the diffdyn.Model
+}
+
+py::object WrapModel(std::string spec, std::unique_ptr<TransitionModel> model) {
+  return py::cast(std::make_shared<PyModel>(std::move(spec), std::move(model)));
+}
+
 std::string ModelSpec(const py::handle& model) {
   if (py::isinstance<py::str>(model)) return model.cast<std::string>();
   if (py::isinstance<PyModel>(model)) return model.cast<const PyModel&>().spec();

@@ -1,6 +1,8 @@
 // The compiled part of the `diffdyn` Python package (diffdyn/__init__.py re-exports
-// it): models over numpy batches (model_bindings.cc), the training and evaluation
-// `diffdyn train --json` and `diffdyn eval --json` print, the library's version, and its errors as Python exceptions:
+// it): models over numpy batches (model_bindings.cc), control tasks and MPPI
+// (task_bindings.cc, mppi_bindings.cc), the training, evaluation and diagnosis whose
+// summaries `diffdyn train / eval / diagnose --json` print, the library's version,
+// and its errors as Python exceptions:
 // diffdyn::Error (bad input) becomes ValueError with the command line's message,
 // diffdyn::NumericalError (a runtime failure) RuntimeError.
 #include <cstdint>
@@ -15,6 +17,7 @@
 #include "arrays.h"
 #include "bindings.h"
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/solvers/model_diagnosis.h"
 #include "diffdyn/solvers/model_evaluation.h"
 #include "diffdyn/solvers/model_training.h"
 #include "diffdyn/solvers/version.h"
@@ -109,6 +112,29 @@ py::object Train(const std::string& data, const std::string& model, const std::s
   return py::module_::import("json").attr("loads")(text);
 }
 
+// The `diagnose --json` summary; report.md, extended_model.json and residuals.csv go to `out`.
+py::object Diagnose(const py::handle& model, const std::string& measured, const std::string& out,
+                    const std::vector<std::string>& params, const std::string& params_file,
+                    const std::vector<std::string>& fit_params, const std::vector<std::string>& scale_params,
+                    double cutoff_hz, double holdout, double phase_period, double rollout_horizon,
+                    double min_effect_to_noise, double alpha, std::uint64_t seed) {
+  DiagnoseRequest r{.model = ModelSpec(model), .measured = measured, .out = out, .params = params,
+                    .params_file = params_file, .fit_params = fit_params, .scale_params = scale_params};
+  r.pipeline.cutoff_hz = cutoff_hz;
+  r.pipeline.holdout_fraction = holdout;
+  r.pipeline.phase_period = phase_period;
+  r.pipeline.rollout_horizon = rollout_horizon;
+  r.pipeline.min_effect_to_noise = min_effect_to_noise;
+  r.pipeline.alpha = alpha;
+  r.pipeline.seed = seed;
+  std::string text;
+  {
+    py::gil_scoped_release release;
+    text = DiagnoseFiles(r).dump();
+  }
+  return py::module_::import("json").attr("loads")(text);
+}
+
 void TranslateErrors() {
   py::register_exception_translator([](std::exception_ptr p) {
     try {
@@ -131,6 +157,8 @@ PYBIND11_MODULE(_diffdyn, m) {
   m.attr("__version__") = diffdyn::Version();
   TranslateErrors();
   BindModels(m);
+  BindTasks(m);
+  BindMppi(m);
   m.def("evaluate", &Evaluate, py::arg("model"), py::arg("data"), py::arg("solver") = "", py::arg("steps") = 0,
         py::arg("substeps") = 4, py::arg("threads") = 0,
         R"doc(The dictionary `diffdyn eval --model MODEL --data DATA --json` prints, from the same
@@ -142,6 +170,16 @@ models take the data's median interval). solver / steps / substeps as the comman
 snake case: solver, steps, hidden, loss, epochs, lr, batch, val_fraction, gamma, threads,
 patience, normalize, seed, mass_epsilon, diagonal_floor, actuated ("auto", "all" or a list of
 1-based joints), prismatic (a list), angle_features ("sincos" or "raw"), progress (a bar on stderr).)doc");
+  const diffdyn::DiagnosisOptions d;
+  m.def("_diagnose", &Diagnose, py::arg("model"), py::arg("measured"), py::arg("out"),
+        py::arg("params") = std::vector<std::string>{}, py::arg("params_file") = "",
+        py::arg("fit_params") = std::vector<std::string>{}, py::arg("scale_params") = std::vector<std::string>{},
+        py::arg("cutoff_hz") = d.cutoff_hz, py::arg("holdout") = d.holdout_fraction,
+        py::arg("phase_period") = d.phase_period, py::arg("rollout_horizon") = d.rollout_horizon,
+        py::arg("min_effect_to_noise") = d.min_effect_to_noise, py::arg("alpha") = d.alpha, py::arg("seed") = 0,
+        "The diagnosis of diffdyn.diagnose without the plots (see there).");
+  m.def("_plots_dir", [] { return diffdyn::PlotScriptsDir().string(); },
+        "The folder of the plot scripts the command line runs.");
   m.def("_input_copies", [] { return InputCopies().load(); },
         "How many input arrays were converted (copied) instead of read in place (for tests).");
 }
