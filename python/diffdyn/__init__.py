@@ -28,10 +28,11 @@ import sys
 import warnings
 
 from . import _diffdyn
-from ._diffdyn import Model, Mppi, Task, TaskCost, __version__, evaluate, ground_truth, load_model, train
+from ._diffdyn import (Model, Mppi, Task, TaskCost, __version__, delan_decompose, evaluate, ground_truth, load_model,
+                       train)
 
-__all__ = ["Model", "Mppi", "Task", "TaskCost", "diagnose", "evaluate", "ground_truth", "load_model", "train",
-           "__version__"]
+__all__ = ["Model", "Mppi", "Task", "TaskCost", "delan_decompose", "diagnose", "evaluate", "ground_truth",
+           "load_model", "train", "__version__"]
 
 
 def diagnose(model, measured, out, plots=True, **options):

@@ -13,6 +13,9 @@ namespace diffdyn::python {
 /// diffdyn.Model and diffdyn.load_model (model_bindings.cc).
 void BindModels(pybind11::module_& m);
 
+/// diffdyn.delan_decompose (delan_bindings.cc).
+void BindDelan(pybind11::module_& m);
+
 /// diffdyn.Mppi, diffdyn.TaskCost (mppi_bindings.cc).
 void BindMppi(pybind11::module_& m);
 

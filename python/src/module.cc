@@ -1,5 +1,6 @@
 // The compiled part of the `diffdyn` Python package (diffdyn/__init__.py re-exports
-// it): models over numpy batches (model_bindings.cc), control tasks and MPPI
+// it): models over numpy batches (model_bindings.cc), DeLaN's torque parts
+// (delan_bindings.cc), control tasks and MPPI
 // (task_bindings.cc, mppi_bindings.cc), the training, evaluation and diagnosis whose
 // summaries `diffdyn train / eval / diagnose --json` print, the library's version,
 // and its errors as Python exceptions:
@@ -158,6 +159,7 @@ PYBIND11_MODULE(_diffdyn, m) {
   TranslateErrors();
   BindModels(m);
   BindTasks(m);
+  BindDelan(m);
   BindMppi(m);
   m.def("evaluate", &Evaluate, py::arg("model"), py::arg("data"), py::arg("solver") = "", py::arg("steps") = 0,
         py::arg("substeps") = 4, py::arg("threads") = 0,
