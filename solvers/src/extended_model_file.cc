@@ -38,7 +38,7 @@ Eigen::Index CountParameters(const nlohmann::json& arch) {
     const auto& r = arch["residual"];
     DIFFDYN_CHECK(r.is_object() && r.contains("hidden"), "architecture: residual needs an integer 'hidden'");
     const Eigen::Index n = model->dof(), h = JsonInt(r["hidden"], 1, 4096, "architecture: residual 'hidden'");
-    count += 6 * n + h * 3 * n + h + n * h + n;
+    count += 6 * n + ResidualNetwork::Architecture(static_cast<int>(n), static_cast<int>(h)).num_parameters();
   }
   return count;
 }
@@ -77,18 +77,12 @@ void SaveExtendedModel(const std::filesystem::path& path, const ExtendedModel& m
   theta.assign(effect_params.data(), effect_params.data() + effect_params.size());
   if (const ResidualNetwork* net = model.residual()) {
     const int n = model.dof();
-    arch["residual"] = {{"inputs", 3 * n}, {"hidden", net->w1.rows()}, {"outputs", n},
-                        {"activation", "tanh"}};
-    // Vectors and matrices appended in place (column-major), no temporaries.
-    const auto append = [&theta](const auto& m) {
-      theta.insert(theta.end(), m.data(), m.data() + m.size());
-    };
+    arch["residual"] = {{"inputs", 3 * n}, {"hidden", net->hidden()}, {"outputs", n}, {"activation", "tanh"}};
+    // in_mean, in_scale, then the network's flat parameters [vec(W1), b1, vec(W2), b2].
+    const auto append = [&theta](const Eigen::VectorXd& v) { theta.insert(theta.end(), v.data(), v.data() + v.size()); };
     append(net->in_mean);
     append(net->in_scale);
-    append(net->w1);
-    append(net->b1);
-    append(net->w2);
-    append(net->b2);
+    append(net->net.parameters());
   } else {
     arch["residual"] = nullptr;
   }
@@ -126,17 +120,15 @@ ExtendedModel LoadExtendedModel(const std::filesystem::path& path) {
   if (arch.contains("residual") && !arch["residual"].is_null()) {
     const int n = model->dof(), h = arch["residual"]["hidden"].get<int>();
     auto net = std::make_shared<ResidualNetwork>();
-    auto take = [&](int rows, int cols) {
-      Eigen::MatrixXd m = Eigen::Map<const Eigen::MatrixXd>(file.parameters.data() + k, rows, cols);
-      k += rows * cols;
-      return m;
+    auto take = [&](Eigen::Index count) {
+      Eigen::VectorXd v = file.parameters.segment(k, count);
+      k += static_cast<int>(count);
+      return v;
     };
-    net->in_mean = take(3 * n, 1);
-    net->in_scale = take(3 * n, 1);
-    net->w1 = take(h, 3 * n);
-    net->b1 = take(h, 1);
-    net->w2 = take(n, h);
-    net->b2 = take(n, 1);
+    net->in_mean = take(3 * n);
+    net->in_scale = take(3 * n);
+    const MlpArchitecture arch_net = ResidualNetwork::Architecture(n, h);
+    net->net = Mlp<double>(arch_net, take(arch_net.num_parameters()));
     residual = net;
   }
   try {

@@ -14,8 +14,9 @@
 //   [W2 b2] = argmin sum_k |y_k - W2 h_k - b2|^2 + lambda |W2|^2,
 //
 // a linear least-squares problem with a closed-form solution, so fitting is
-// deterministic and takes milliseconds. Evaluation is templated (Jets pass
-// through tanh) so it can sit inside an extended model's torque.
+// deterministic and takes milliseconds. The network is the project's Mlp
+// (models/mlp.h), evaluated on double or Jets, so it can sit inside an extended
+// model's torque.
 #pragma once
 
 #include <cmath>
@@ -25,6 +26,7 @@
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/mlp.h"
 #include "diffdyn/physics/analytic_model.h"
 
 namespace diffdyn {
@@ -33,18 +35,21 @@ namespace diffdyn {
 struct ResidualNetwork {
   Eigen::VectorXd in_mean;   ///< 3n
   Eigen::VectorXd in_scale;  ///< 3n, positive
-  Eigen::MatrixXd w1;        ///< H x 3n
-  Eigen::VectorXd b1;        ///< H
-  Eigen::MatrixXd w2;        ///< n x H
-  Eigen::VectorXd b2;        ///< n
+  /// The network [3n, H (tanh), n]: W1 = net.W(0), b1 = net.b(0), W2 = net.W(1),
+  /// b2 = net.b(1); its flat parameters are [vec(W1), b1, vec(W2), b2].
+  Mlp<double> net;
+
+  /// The architecture of a residual over n joints with `hidden` features.
+  static MlpArchitecture Architecture(int n, int hidden) { return {{3 * n, hidden, n}, {Activation::Tanh()}}; }
 
   /// Number of joints n (0 for an empty network).
-  int dof() const { return static_cast<int>(w2.rows()); }
+  int dof() const { return net.architecture().sizes.empty() ? 0 : net.num_outputs(); }
+  /// Number of hidden features H.
+  int hidden() const { return net.architecture().sizes[1]; }
 
   /// r(x) (n) for x = (q, qd, qdd), each of size n.
   template <typename T>
   VectorX<T> operator()(const VectorX<T>& q, const VectorX<T>& qd, const VectorX<T>& qdd) const {
-    using std::tanh;
     const int n = dof();
     VectorX<T> s(3 * n);
     for (int j = 0; j < n; ++j) {
@@ -52,19 +57,7 @@ struct ResidualNetwork {
       s[n + j] = (qd[j] - in_mean[n + j]) / in_scale[n + j];
       s[2 * n + j] = (qdd[j] - in_mean[2 * n + j]) / in_scale[2 * n + j];
     }
-    VectorX<T> h(w1.rows());
-    for (int k = 0; k < w1.rows(); ++k) {
-      T acc = T(b1[k]);
-      for (int i = 0; i < 3 * n; ++i) acc += w1(k, i) * s[i];
-      h[k] = tanh(acc);
-    }
-    VectorX<T> out(n);
-    for (int j = 0; j < n; ++j) {
-      T acc = T(b2[j]);
-      for (int k = 0; k < h.size(); ++k) acc += w2(j, k) * h[k];
-      out[j] = acc;
-    }
-    return out;
+    return net(s);
   }
 
   /// Fits the output layer. inputs: 3n x N (q; qd; qdd per column), targets:
@@ -78,36 +71,36 @@ struct ResidualNetwork {
     DIFFDYN_CHECK(d == 3 * n && targets.cols() == count && count > 0 && hidden > 0,
                   "ResidualNetwork::Fit: inputs ", d, "x", count, ", targets ", n, "x",
                   targets.cols(), ", hidden ", hidden);
-    ResidualNetwork net;
-    net.in_mean = inputs.rowwise().mean();
-    net.in_scale = ((inputs.colwise() - net.in_mean).array().square().rowwise().mean().sqrt() +
-                    1e-9)
-                       .matrix();
-    net.w1.resize(hidden, d);
-    net.b1.resize(hidden);
+    ResidualNetwork result;
+    result.in_mean = inputs.rowwise().mean();
+    result.in_scale = ((inputs.colwise() - result.in_mean).array().square().rowwise().mean().sqrt() + 1e-9).matrix();
+    Eigen::MatrixXd w1(hidden, d);
+    Eigen::VectorXd b1(hidden);
     const double w_scale = 1.0 / std::sqrt(static_cast<double>(d));
     for (int k = 0; k < hidden; ++k) {
-      for (int i = 0; i < d; ++i) net.w1(k, i) = w_scale * StandardNormal(rng);
-      net.b1[k] = StandardNormal(rng);
+      for (int i = 0; i < d; ++i) w1(k, i) = w_scale * StandardNormal(rng);
+      b1[k] = StandardNormal(rng);
     }
     // A constant input (e.g. qdd given as zeros) is left out: its weights are
     // zeroed, so the network does not depend on it at all.
     for (int i = 0; i < d; ++i) {
-      if (net.in_scale[i] <= 2e-9) net.w1.col(i).setZero();
+      if (result.in_scale[i] <= 2e-9) w1.col(i).setZero();
     }
     // Hidden features of every sample, with a constant row for b2.
-    const Eigen::MatrixXd s =
-        (inputs.colwise() - net.in_mean).array().colwise() / net.in_scale.array();
+    const Eigen::MatrixXd s = (inputs.colwise() - result.in_mean).array().colwise() / result.in_scale.array();
     Eigen::MatrixXd h(hidden + 1, count);
-    h.topRows(hidden) = ((net.w1 * s).colwise() + net.b1).array().tanh().matrix();
+    h.topRows(hidden) = ((w1 * s).colwise() + b1).array().tanh().matrix();
     h.row(hidden).setOnes();
     Eigen::MatrixXd gram = h * h.transpose();
     const double energy = gram.diagonal().head(hidden).mean();
     gram.diagonal().head(hidden).array() += lambda * energy;
     const Eigen::MatrixXd solution = gram.ldlt().solve(h * targets.transpose());  // (H+1) x n
-    net.w2 = solution.topRows(hidden).transpose();
-    net.b2 = solution.row(hidden).transpose();
-    return net;
+    // The network's flat parameters [vec(W1), b1, vec(W2), b2].
+    const MlpArchitecture arch = Architecture(n, hidden);
+    Eigen::VectorXd theta(arch.num_parameters());
+    theta << w1.reshaped(), b1, solution.topRows(hidden).transpose().reshaped(), solution.row(hidden).transpose();
+    result.net = Mlp<double>(arch, std::move(theta));
+    return result;
   }
 };
 
