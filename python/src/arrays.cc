@@ -63,6 +63,18 @@ Batch ReadBatch(const py::handle& object, int size, const std::string& what) {
 
 py::array_t<double> NewArray(const std::vector<py::ssize_t>& shape) { return py::array_t<double>(shape); }
 
+py::array_t<double> FromColumns(const Eigen::Ref<const Eigen::MatrixXd>& columns) {
+  py::array_t<double> out = NewArray({columns.cols(), columns.rows()});
+  Eigen::Map<Eigen::MatrixXd>(out.mutable_data(), columns.rows(), columns.cols()) = columns;
+  return out;
+}
+
+py::array_t<double> FromVector(const Eigen::Ref<const Eigen::VectorXd>& v) {
+  py::array_t<double> out = NewArray({v.size()});
+  Eigen::Map<Eigen::VectorXd>(out.mutable_data(), v.size()) = v;
+  return out;
+}
+
 py::array Returned(const py::array_t<double>& result, bool float32) {
   if (!float32) return result;
   return py::array_t<float>(result);  // converting copy

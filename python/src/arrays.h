@@ -52,6 +52,12 @@ py::array_t<double> ReadArray(const py::handle& object, int ndim, const std::str
 /// A new C-contiguous float64 array of the given shape.
 py::array_t<double> NewArray(const std::vector<py::ssize_t>& shape);
 
+/// A new (N, rows) array holding the columns of a rows x N matrix, one per row.
+py::array_t<double> FromColumns(const Eigen::Ref<const Eigen::MatrixXd>& columns);
+
+/// A new 1-D array holding `v`.
+py::array_t<double> FromVector(const Eigen::Ref<const Eigen::VectorXd>& v);
+
 /// `result` as float32 when `float32`, else itself.
 py::array Returned(const py::array_t<double>& result, bool float32);
 

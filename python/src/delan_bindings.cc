@@ -14,13 +14,6 @@
 namespace diffdyn::python {
 namespace {
 
-// rows x N -> a new (N, rows) array.
-py::array_t<double> Samples(const Eigen::Ref<const Eigen::MatrixXd>& values) {
-  py::array_t<double> out = NewArray({values.cols(), values.rows()});
-  Eigen::Map<Eigen::MatrixXd>(out.mutable_data(), values.rows(), values.cols()) = values;
-  return out;
-}
-
 py::dict Decompose(const std::string& path, const py::handle& q_in, const py::handle& qd_in,
                    const py::handle& qdd_in, int threads) {
   const Delan model = LoadDelan(path);
@@ -39,15 +32,15 @@ py::dict Decompose(const std::string& path, const py::handle& q_in, const py::ha
     parts = model.Decompose(q.matrix(), qd.matrix(), qdd.matrix(), &ws, threads);
   }
   py::dict out;
-  out["tau"] = Samples(parts.torque);
-  out["m"] = Samples(parts.inertial);
-  out["c"] = Samples(parts.coriolis);
-  out["g"] = Samples(parts.gravity);
-  out["f"] = Samples(parts.friction);
-  out["kinetic"] = Samples(parts.kinetic);
-  out["potential"] = Samples(parts.potential);
-  out["power"] = Samples(parts.power);
-  out["min_mass_eigenvalue"] = Samples(parts.min_mass_eigenvalue);
+  out["tau"] = FromColumns(parts.torque);
+  out["m"] = FromColumns(parts.inertial);
+  out["c"] = FromColumns(parts.coriolis);
+  out["g"] = FromColumns(parts.gravity);
+  out["f"] = FromColumns(parts.friction);
+  out["kinetic"] = FromColumns(parts.kinetic);
+  out["potential"] = FromColumns(parts.potential);
+  out["power"] = FromColumns(parts.power);
+  out["min_mass_eigenvalue"] = FromColumns(parts.min_mass_eigenvalue);
   return out;
 }
 

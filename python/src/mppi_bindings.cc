@@ -37,13 +37,6 @@ struct TaskCostSpec {
   double terminal_seconds = 10.0;
 };
 
-// (B, rows) numpy copy of a rows x B block.
-py::array_t<double> Rows(const Eigen::Ref<const Eigen::MatrixXd>& block) {
-  py::array_t<double> out = NewArray({block.cols(), block.rows()});
-  Eigen::Map<Eigen::MatrixXd>(out.mutable_data(), block.rows(), block.cols()) = block;
-  return out;
-}
-
 // cost(t, x_t, u_t, x_{t+1}) -> (B,) in Python, added to the samples' costs.
 class PythonCost final : public MppiCost {
  public:
@@ -62,7 +55,7 @@ class PythonCost final : public MppiCost {
                       const Eigen::Ref<const Eigen::MatrixXd>& actions, const Eigen::Ref<const Eigen::MatrixXd>& states,
                       Eigen::Ref<Eigen::VectorXd> costs) const override {
     py::gil_scoped_acquire acquire;
-    const py::object result = function_(t, Rows(prev_states), Rows(actions), Rows(states));
+    const py::object result = function_(t, FromColumns(prev_states), FromColumns(actions), FromColumns(states));
     const auto values = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(result);
     DIFFDYN_CHECK(values && values.ndim() == 1 && values.size() == costs.size(),
                   "Mppi: the cost must return one number per sample, shape (", costs.size(), ",)");
@@ -122,22 +115,16 @@ class PyMppi {
       py::gil_scoped_release release;
       u = mppi_->Command(x.matrix().col(0));
     }
-    py::array_t<double> out = NewArray({u.size()});
-    Eigen::Map<Eigen::VectorXd>(out.mutable_data(), u.size()) = u;
-    return out;
+    return FromVector(u);
   }
 
   void Reset() { mppi_->Reset(); }
-  py::array_t<double> Nominal() const { return Rows(mppi_->nominal()); }
-  py::array_t<double> SampleCosts() const {
-    py::array_t<double> out = NewArray({mppi_->sample_costs().size()});
-    Eigen::Map<Eigen::VectorXd>(out.mutable_data(), out.size()) = mppi_->sample_costs();
-    return out;
-  }
+  py::array_t<double> Nominal() const { return FromColumns(mppi_->nominal()); }
+  py::array_t<double> SampleCosts() const { return FromVector(mppi_->sample_costs()); }
   py::array_t<double> PredictNominal(const py::handle& x_in) const {
     const Batch x = ReadBatch(x_in, model_->state_size(), "Mppi.predict_nominal: x");
     DIFFDYN_CHECK(x.single, "Mppi.predict_nominal: x is one state (n,)");
-    return Rows(mppi_->PredictNominal(x.matrix().col(0)));
+    return FromColumns(mppi_->PredictNominal(x.matrix().col(0)));
   }
 
  private:

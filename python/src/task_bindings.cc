@@ -14,28 +14,20 @@
 
 #include "arrays.h"
 #include "bindings.h"
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/physics/control_task.h"
+#include "diffdyn/solvers/control.h"
 #include "diffdyn/solvers/joint_collect.h"
 
 namespace diffdyn::python {
 namespace {
 
-// A vector as a new 1-D numpy array.
-py::array_t<double> ToArray(const Eigen::VectorXd& v) {
-  py::array_t<double> out = NewArray({v.size()});
-  Eigen::Map<Eigen::VectorXd>(out.mutable_data(), v.size()) = v;
-  return out;
-}
-
-// Start s is the s-th draw of Rng(seed), as EvaluateController draws them: (count, n).
+// The evaluator's starts (DrawStarts): (count, n).
 py::array_t<double> SampleStarts(const ControlTask& task, int count, std::uint64_t seed) {
-  DIFFDYN_CHECK(count >= 1, "sample_starts: count must be >= 1, got ", count);
-  const int n = task.state_size();
-  py::array_t<double> out = NewArray({count, n});
-  Rng rng(seed);
-  for (int s = 0; s < count; ++s) Eigen::Map<Eigen::VectorXd>(out.mutable_data() + s * n, n) = task.SampleStart(rng);
-  return out;
+  DIFFDYN_CHECK(count >= 1 && count <= 100000, "sample_starts: count must be in [1, 100000], got ", count);
+  const std::vector<Eigen::VectorXd> starts = DrawStarts(task, count, seed);
+  Eigen::MatrixXd columns(task.state_size(), count);
+  for (int s = 0; s < count; ++s) columns.col(s) = starts[static_cast<std::size_t>(s)];
+  return FromColumns(columns);
 }
 
 // c(x, u) per sample: x (N, n), u (N, m) -> (N,); one sample -> a float.
@@ -46,7 +38,7 @@ py::object RunningCost(const ControlTask& task, const py::handle& x_in, const py
   Eigen::VectorXd costs(x.samples);
   for (int b = 0; b < x.samples; ++b) costs[b] = task.RunningCost(x.matrix().col(b), task.Clip(u.matrix().col(b)));
   if (x.single) return py::float_(costs[0]);
-  return ToArray(costs);
+  return FromVector(costs);
 }
 
 // The success test per sample: x (N, n) -> list of bool; one sample -> bool.
@@ -84,9 +76,7 @@ py::dict GroundTruth(const std::string& system, const py::handle& states_in, con
   }
   py::dict out;
   for (const auto& [name, channel] : trajectory.channels) {
-    py::array_t<double> values = NewArray({channel.cols(), channel.rows()});
-    Eigen::Map<Eigen::MatrixXd>(values.mutable_data(), channel.rows(), channel.cols()) = channel;
-    out[py::str(name)] = values;
+    out[py::str(name)] = FromColumns(channel);
   }
   return out;
 }
@@ -104,9 +94,9 @@ torque bounds and the control period. Task("pendulum") or Task("cartpole").)doc"
       .def_readonly("duration", &ControlTask::duration, "Run length (s).")
       .def_property_readonly("state_size", &ControlTask::state_size)
       .def_property_readonly("action_size", &ControlTask::action_size)
-      .def_property_readonly("bound", [](const ControlTask& t) { return ToArray(t.plant.bound); },
+      .def_property_readonly("bound", [](const ControlTask& t) { return FromVector(t.plant.bound); },
                              "|u_j| bound per action (m,).")
-      .def_property_readonly("goal", [](const ControlTask& t) { return ToArray(t.goal); })
+      .def_property_readonly("goal", [](const ControlTask& t) { return FromVector(t.goal); })
       .def("sample_starts", &SampleStarts, py::arg("count"), py::arg("seed") = 0,
            "(count, n) start states: the ones `diffdyn control --starts COUNT --seed SEED` runs from.")
       .def("running_cost", &RunningCost, py::arg("x"), py::arg("u"),

@@ -18,14 +18,6 @@ double MillisecondsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-// Start s of a seeded evaluation: the s-th draw of Rng(seed).
-std::vector<Eigen::VectorXd> DrawStarts(const ControlTask& task, int count, std::uint64_t seed) {
-  Rng rng(seed);
-  std::vector<Eigen::VectorXd> starts;
-  for (int s = 0; s < count; ++s) starts.push_back(task.SampleStart(rng));
-  return starts;
-}
-
 // One run of `controller` from x0 on `plant` (one control period per step).
 ControlRun RunFrom(const ControlTask& task, const TransitionModel& plant, Controller& controller,
                    const Eigen::VectorXd& x0, std::uint64_t seed) {
@@ -64,6 +56,13 @@ ControlRun RunFrom(const ControlTask& task, const TransitionModel& plant, Contro
 }
 
 }  // namespace
+
+std::vector<Eigen::VectorXd> DrawStarts(const ControlTask& task, int count, std::uint64_t seed) {
+  Rng rng(seed);
+  std::vector<Eigen::VectorXd> starts;
+  for (int s = 0; s < count; ++s) starts.push_back(task.SampleStart(rng));
+  return starts;
+}
 
 int PeriodsPerStep(double dt, double period, const std::string& what) {
   DIFFDYN_CHECK(dt > 0 && std::isfinite(dt), what, ": the model records no time step (train it with diffdyn train on "

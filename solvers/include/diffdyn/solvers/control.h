@@ -81,6 +81,10 @@ struct EvaluationOptions {
   std::function<void(int)> progress{};
 };
 
+/// The `count` seeded starts of an evaluation: start s is the s-th draw of Rng(seed)
+/// from the task's start box (n each).
+std::vector<Eigen::VectorXd> DrawStarts(const ControlTask& task, int count, std::uint64_t seed);
+
 /// Runs `controller` from each seeded start (file comment). Throws
 /// diffdyn::NumericalError when the plant's state becomes non-finite.
 std::vector<ControlRun> EvaluateController(const ControlTask& task, Controller& controller,
