@@ -123,6 +123,26 @@ nlohmann::json TrainDelanFiles(const TrainRequest& r) {
 
 }  // namespace
 
+FittedModel FitLearnedModel(const Dataset& data, LearnedModelConfig config, const TrainOptions& options,
+                            int horizon, bool normalize) {
+  config.system = data.system;
+  config.Validate();
+  const Windows windows = MakeWindows(data, horizon);
+  if (normalize) {
+    std::vector<int> train_index, val_index;
+    SplitWindows(windows.size(), options.val_fraction, options.seed, &train_index, &val_index);
+    DIFFDYN_CHECK(!train_index.empty(), "the split of ", windows.size(), " windows at validation fraction ",
+                  options.val_fraction, " leaves none for training");
+    const Windows train = SelectWindows(windows, train_index);
+    config.scaling = FitScaling(config, train.start, train.actions[0], train.targets[0]);
+  }
+  FittedModel fit{LearnedModel::Initialized(config, options.seed), {}};
+  fit.model.set_time_step(data.Intervals().median);
+  Trainer trainer(&fit.model, options);
+  fit.result = trainer.Train(windows);
+  return fit;
+}
+
 nlohmann::json TrainFiles(const TrainRequest& r) {
   CheckRequest(r);
   if (IsDelanKind(r.model)) return TrainDelanFiles(r);
@@ -136,20 +156,13 @@ nlohmann::json TrainFiles(const TrainRequest& r) {
   config.hidden = r.hidden.value_or(100);
   config.Validate();
   const int horizon = r.loss == "multi" ? 4 : 1;
-  const Windows data = MakeWindows(dataset, horizon);
   std::vector<int> train_index, val_index;
-  SplitWindows(data.size(), r.val_fraction, r.seed, &train_index, &val_index);
+  SplitWindows(MakeWindows(dataset, horizon).size(), r.val_fraction, r.seed, &train_index, &val_index);
   DIFFDYN_CHECK(!train_index.empty() && !val_index.empty(), "--val-fraction ", r.val_fraction, " of the ",
-                data.size(), " samples of ", r.data, " leaves ", train_index.size(), " for training and ",
-                val_index.size(), " for validation (both need at least one)");
-  // Unit-scale network inputs and outputs, fitted on the training split's first steps.
+                train_index.size() + val_index.size(), " samples of ", r.data, " leaves ", train_index.size(),
+                " for training and ", val_index.size(), " for validation (both need at least one)");
+  // Unit-scale network inputs and outputs unless the data are the paper's pushing CSVs.
   const bool normalize = r.normalize == "on" || (r.normalize == "auto" && dataset.format != "pushing-csv");
-  if (normalize) {
-    const Windows train = SelectWindows(data, train_index);
-    config.scaling = FitScaling(config, train.start, train.actions[0], train.targets[0]);
-  }
-
-  LearnedModel model = LearnedModel::Initialized(config, r.seed);
   TrainOptions options;
   options.epochs = r.epochs.value_or(100);
   options.learning_rate = r.lr.value_or(1e-3);
@@ -160,8 +173,9 @@ nlohmann::json TrainFiles(const TrainRequest& r) {
   options.threads = r.threads;
   options.patience = r.patience;
   options.progress = r.progress;
-  Trainer trainer(&model, options);
-  const TrainResult result = trainer.Train(data);
+  const FittedModel fit = FitLearnedModel(dataset, config, options, horizon, normalize);
+  const LearnedModel& model = fit.model;
+  const TrainResult& result = fit.result;
   CheckTrained(result, model.parameters(), "a smaller --lr or --normalize on");
 
   const nlohmann::json provenance = {

@@ -27,7 +27,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "diffdyn/models/learned_model.h"
 #include "diffdyn/solvers/dataset_io.h"
+#include "diffdyn/solvers/training.h"
 
 namespace diffdyn {
 
@@ -58,6 +60,27 @@ struct TrainRequest {
   JointLayout layout{};
   bool angle_features_given = false;
 };
+
+/// A learned model and how its training went.
+struct FittedModel {
+  LearnedModel model;
+  TrainResult result;
+};
+
+/// The learned model of `config` (its system replaced by the data's) fitted to `data`:
+/// the windows of `horizon` steps (1: single-step loss, 4: the paper's multi-step
+/// loss), the trainer's seeded split (options.val_fraction, options.seed), input and
+/// output scalings fitted on the training split's first steps when `normalize`
+/// (FitScaling), the parameters initialised from Rng(options.seed), the time step the
+/// data's median interval, then Trainer. Throws diffdyn::Error for bad options or
+/// data (e.g. a split that leaves no training window) and diffdyn::NumericalError when
+/// training diverges.
+///
+///   FittedModel fit = FitLearnedModel(ReadDataset("pendulum.csv"),
+///                                     {.type = LearnedKind::kAbsNode, .hidden = 64, .steps = 3},
+///                                     {.epochs = 100, .seed = 1});
+FittedModel FitLearnedModel(const Dataset& data, LearnedModelConfig config, const TrainOptions& options,
+                            int horizon = 1, bool normalize = true);
 
 /// Trains and saves the model of `request` and returns the `train --json` summary
 /// (file comment). Throws diffdyn::Error (one line naming the option) for bad
