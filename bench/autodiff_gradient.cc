@@ -17,7 +17,7 @@
 
 #include "diffdyn/autodiff_ode/adjoint.h"
 #include "diffdyn/autodiff_ode/jacobian.h"
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

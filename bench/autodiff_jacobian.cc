@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "diffdyn/autodiff_ode/jacobian.h"
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

@@ -9,8 +9,8 @@
 
 #include <vector>
 
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/continuous_model.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/physics/analytic_model.h"
 #include "diffdyn/physics/simple_models.h"
 

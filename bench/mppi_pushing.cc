@@ -32,7 +32,7 @@
 
 #include "diffdyn/models/learned_model.h"
 #include "diffdyn/solvers/mppi.h"
-#include "diffdyn/solvers/pushing_cost.h"
+#include "diffdyn/solvers/pushing/cost.h"
 #include "peak_dgemm.h"
 
 namespace diffdyn {

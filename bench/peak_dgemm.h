@@ -14,7 +14,7 @@
 
 #include <Eigen/Core>
 
-#include "diffdyn/autodiff_ode/parallel.h"
+#include "diffdyn/models/parallel.h"
 
 namespace diffdyn::bench {
 

@@ -7,8 +7,8 @@
 
 #include <benchmark/benchmark.h>
 
-#include "diffdyn/physics/pushing_collect.h"
-#include "diffdyn/physics/pushing_env.h"
+#include "diffdyn/physics/pushing/collect.h"
+#include "diffdyn/physics/pushing/env.h"
 
 namespace {
 

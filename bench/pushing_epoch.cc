@@ -22,8 +22,8 @@
 #include <string>
 #include <vector>
 
-#include "diffdyn/autodiff_ode/parallel.h"
 #include "diffdyn/models/learned_model.h"
+#include "diffdyn/models/parallel.h"
 #include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/training.h"
 #include "peak_dgemm.h"

@@ -5,6 +5,7 @@
 //   diffdyn control --system pendulum --controller lqr --starts 300 --seed 1
 //   diffdyn control --system pendulum --controller shooting --starts 300 --seed 1 [--iterations 50]
 //   diffdyn control --system pendulum --controller hjb --model value.json --starts 300 --seed 1
+//   diffdyn control --system pushing --controller mppi [--model M] --starts 50 --seed 1
 //
 // `lqr` is the regulator of the task's own analytic model linearised at the goal
 // (solvers/lqr.h), clipped to the bounds by the evaluator. `shooting` solves the
@@ -25,6 +26,11 @@
 // torque of the task's actuated joints). The model's step must be a whole
 // multiple of the 8-ms control period (else exit 2).
 //
+// On `--system pushing` (solvers/pushing/trials.h: the obstacle task of `diffdyn push`,
+// one push per step, each costing the seed's cost) the controller is pushing's MPPI
+// with `diffdyn push`'s defaults (T = 20 pushes, the safety margin and reach terms;
+// --samples and --threads apply) over M, by default the simulation itself (`oracle`).
+//
 // --out DIR writes DIR/starts.csv (start,x0_1..x0_n,success,cost,max_abs_u,seconds)
 // and DIR/trajectories/start_<s>.csv (t, the states, the actions held from t).
 #include <algorithm>
@@ -37,15 +43,16 @@
 #include <fmt/core.h>
 
 #include "command.h"
-#include "diffdyn/autodiff_ode/io.h"
-#include "diffdyn/autodiff_ode/progress.h"
+#include "diffdyn/models/io.h"
+#include "diffdyn/models/progress.h"
 #include "diffdyn/physics/control_task.h"
+#include "diffdyn/physics/pushing/system.h"
 #include "diffdyn/solvers/control.h"
 #include "diffdyn/solvers/hjb.h"
+#include "diffdyn/solvers/load_model.h"
 #include "diffdyn/solvers/lqr.h"
 #include "diffdyn/solvers/multiple_shooting.h"
-#include "diffdyn/solvers/load_model.h"
-#include "diffdyn/solvers/pushing_trials.h"
+#include "diffdyn/solvers/pushing/trials.h"
 #include "diffdyn/solvers/statistics.h"
 
 namespace diffdyn::cli {
@@ -107,15 +114,119 @@ void WriteTrajectory(const fs::path& path, const Trajectory& tr, const SystemDes
   });
 }
 
-void RunControl(const ControlCommandOptions& o) {
-  // Validate everything before anything is written.
-  const ControlTask task = ControlTaskByName(o.system);
-  DIFFDYN_CHECK(o.starts >= 1 && o.starts <= 100000, "--starts must be in [1, 100000], got ", o.starts);
-  std::unique_ptr<TransitionModel> model;
-  std::unique_ptr<Controller> owned;
-  std::string extra;  // what the text summary adds about the controller
+// What the text and JSON summaries add about the controller.
+struct ControllerNotes {
+  std::string extra{};
   double riccati_residual = -1.0;
   const MultipleShootingController* shooting = nullptr;
+};
+
+// Runs `controller` on `task` from the seeded starts, writes --out, prints the summary.
+void Report(const ControlCommandOptions& o, const Task& task, const SystemDescription& system,
+            Controller& controller, const std::string& model_kind, const ControllerNotes& notes) {
+  if (!o.out.empty()) {
+    std::error_code ec;
+    fs::create_directories(fs::path(o.out) / "trajectories", ec);
+    DIFFDYN_CHECK(!ec, "--out ", o.out, ": cannot create the folder: ", ec.message());
+  }
+
+  ProgressBar bar("control", o.starts, !o.common.quiet);
+  const std::vector<ControlRun> runs = EvaluateController(
+      task, controller,
+      {.starts = o.starts, .seed = o.common.seed, .threads = o.mppi.threads, .progress = [&](int done, int) { bar.Update(done); }});
+  bar.Finish();
+
+  int successes = 0;
+  double max_abs_u = 0.0, cost_sum = 0.0, seconds_sum = 0.0;
+  std::vector<double> costs, command_ms;
+  for (const ControlRun& r : runs) {
+    seconds_sum += r.seconds;
+    successes += r.success ? 1 : 0;
+    max_abs_u = std::max(max_abs_u, r.max_abs_u);
+    cost_sum += r.cost;
+    costs.push_back(r.cost);
+    command_ms.insert(command_ms.end(), r.command_ms.begin(), r.command_ms.end());
+  }
+  const auto [low, high] = WilsonInterval(successes, o.starts);
+  if (!o.out.empty()) {
+    WriteStarts(fs::path(o.out) / "starts.csv", runs);
+    for (std::size_t s = 0; s < runs.size(); ++s) {
+      WriteTrajectory(fs::path(o.out) / "trajectories" / fmt::format("start_{}.csv", s), runs[s].trajectory,
+                      system);
+    }
+  }
+  const double rate = static_cast<double>(successes) / o.starts;
+  const double ms = Percentile(command_ms, 0.5);
+  if (o.common.json) {
+    nlohmann::json summary({{"system", o.system},           {"controller", o.controller},
+               {"starts", o.starts},           {"successes", successes},
+               {"success_rate", rate},         {"ci95_low", low},
+               {"ci95_high", high},            {"mean_cost", cost_sum / o.starts},
+               {"median_cost", Percentile(costs, 0.5)}, {"p90_cost", Percentile(costs, 0.9)},
+               {"max_abs_u", max_abs_u},       {"ms_per_command", ms},
+               {"model", o.model.empty() ? o.system : o.model}, {"model_kind", model_kind},
+               {"hold", controller.hold()},    {"seed", o.common.seed}});
+    if (notes.riccati_residual >= 0) summary["riccati_residual"] = notes.riccati_residual;
+    if (notes.shooting) {
+      const ShootingTotals t = notes.shooting->totals();
+      summary["seconds_per_start"] = seconds_sum / o.starts;
+      summary["max_shooting_defect"] = t.largest_shooting_defect;
+      summary["max_defect"] = t.largest_defect;
+      summary["iterations"] = t.iterations;
+    }
+    PrintJson(summary);
+    return;
+  }
+  std::string extra = notes.extra;
+  if (notes.shooting) {
+    const ShootingTotals t = notes.shooting->totals();
+    extra = fmt::format("; {:.2f} s per start (mean), largest continuity defect {:.1e} after the polish "
+                        "({:.1e} before), {} iterations",
+                        seconds_sum / o.starts, t.largest_defect, t.largest_shooting_defect, t.iterations);
+  }
+  fmt::print("{} on the {} task with {} ({}), {} starts: success {}/{} = {:.0f} % (95 % interval {:.0f}-{:.0f} %)\n",
+             o.controller, o.system, o.model.empty() ? o.system : o.model, model_kind, o.starts, successes,
+             o.starts, 100 * rate, 100 * low, 100 * high);
+  fmt::print("cost mean {:.2f}, median {:.2f}, 90th percentile {:.2f}; max |u| {:.3f}; {:.2f} ms per command "
+             "(median), action held {} period(s){}\n",
+             cost_sum / o.starts, Percentile(costs, 0.5), Percentile(costs, 0.9), max_abs_u, ms, controller.hold(),
+             extra);
+}
+
+// What runs on a task: the planning model and the controller (both owned).
+struct Planner {
+  std::unique_ptr<TransitionModel> model;
+  std::unique_ptr<Controller> controller;
+};
+
+// Pushing's MPPI over --model (default: the simulation itself) on the pushing task.
+Planner PushingPlanner(const ControlCommandOptions& o, const PushingTask& task) {
+  DIFFDYN_CHECK(o.controller == "mppi", "--controller ", o.controller, ": the pushing task takes mppi only");
+  Planner p;
+  p.model = LoadTransitionModel(o.model.empty() || o.model == o.system ? "oracle" : o.model,
+                                {.world = task.world()});
+  p.controller = std::make_unique<PushingMppiController>(task, *p.model);
+  return p;
+}
+
+void RunControl(const ControlCommandOptions& o) {
+  // Validate everything before anything is written.
+  DIFFDYN_CHECK(o.starts >= 1 && o.starts <= 100000, "--starts must be in [1, 100000], got ", o.starts);
+  DIFFDYN_CHECK(o.system == "pushing" || o.system == "pendulum" || o.system == "cartpole", "--system ",
+                o.system.substr(0, 60), ": no control task (pendulum, cartpole or pushing)");
+  if (o.system == "pushing") {
+    PushTaskOptions push;
+    push.samples = o.mppi.samples;
+    push.threads = o.mppi.threads;
+    const PushingTask task(push);
+    const Planner planner = PushingPlanner(o, task);
+    Report(o, task, PushingSystem(), *planner.controller, planner.model->kind(), {});
+    return;
+  }
+  const ControlTask task = ControlTaskByName(o.system);
+  std::unique_ptr<TransitionModel> model;
+  std::unique_ptr<Controller> owned;
+  ControllerNotes notes;
   ValueFunction value;
   std::string model_kind;
   if (o.controller == "hjb") {
@@ -135,89 +246,23 @@ void RunControl(const ControlCommandOptions& o) {
   }
   if (o.controller == "shooting") {
     auto owned_shooting = std::make_unique<MultipleShootingController>(task, o.shooting);
-    shooting = owned_shooting.get();
+    notes.shooting = owned_shooting.get();
     owned = std::move(owned_shooting);
   } else if (o.controller == "lqr") {
     auto lqr = std::make_unique<LqrController>(task, TaskLqr(task));
-    riccati_residual = lqr->solution().riccati_residual;
+    notes.riccati_residual = lqr->solution().riccati_residual;
     std::string gains;
     for (Eigen::Index i = 0; i < lqr->solution().K.size(); ++i) {
       gains += fmt::format("{}{:.4g}", i ? ", " : "", lqr->solution().K.data()[i]);
     }
-    extra = fmt::format("; K = [{}] (column-major), Riccati residual {:.1e}", gains, riccati_residual);
+    notes.extra = fmt::format("; K = [{}] (column-major), Riccati residual {:.1e}", gains, notes.riccati_residual);
     owned = std::move(lqr);
   } else if (o.controller == "mppi") {
     model = PlanningModel(o, task);
     owned = std::make_unique<MppiController>(task, *model, o.mppi);
   }
   if (model) model_kind = model->kind();
-  Controller& controller = *owned;
-  if (!o.out.empty()) {
-    std::error_code ec;
-    fs::create_directories(fs::path(o.out) / "trajectories", ec);
-    DIFFDYN_CHECK(!ec, "--out ", o.out, ": cannot create the folder: ", ec.message());
-  }
-
-  ProgressBar bar("control", o.starts, !o.common.quiet);
-  const std::vector<ControlRun> runs = EvaluateController(
-      task, controller,
-      {.starts = o.starts, .seed = o.common.seed, .threads = o.mppi.threads, .progress = [&](int done) { bar.Update(done); }});
-  bar.Finish();
-
-  int successes = 0;
-  double max_abs_u = 0.0, cost_sum = 0.0, seconds_sum = 0.0;
-  std::vector<double> costs, command_ms;
-  for (const ControlRun& r : runs) {
-    seconds_sum += r.seconds;
-    successes += r.success ? 1 : 0;
-    max_abs_u = std::max(max_abs_u, r.max_abs_u);
-    cost_sum += r.cost;
-    costs.push_back(r.cost);
-    command_ms.insert(command_ms.end(), r.command_ms.begin(), r.command_ms.end());
-  }
-  const auto [low, high] = WilsonInterval(successes, o.starts);
-  if (!o.out.empty()) {
-    WriteStarts(fs::path(o.out) / "starts.csv", runs);
-    for (std::size_t s = 0; s < runs.size(); ++s) {
-      WriteTrajectory(fs::path(o.out) / "trajectories" / fmt::format("start_{}.csv", s), runs[s].trajectory,
-                      task.plant.System());
-    }
-  }
-  const double rate = static_cast<double>(successes) / o.starts;
-  const double ms = Percentile(command_ms, 0.5);
-  if (o.common.json) {
-    nlohmann::json summary({{"system", o.system},           {"controller", o.controller},
-               {"starts", o.starts},           {"successes", successes},
-               {"success_rate", rate},         {"ci95_low", low},
-               {"ci95_high", high},            {"mean_cost", cost_sum / o.starts},
-               {"median_cost", Percentile(costs, 0.5)}, {"p90_cost", Percentile(costs, 0.9)},
-               {"max_abs_u", max_abs_u},       {"ms_per_command", ms},
-               {"model", o.model.empty() ? o.system : o.model}, {"model_kind", model_kind},
-               {"hold", controller.hold()},    {"seed", o.common.seed}});
-    if (riccati_residual >= 0) summary["riccati_residual"] = riccati_residual;
-    if (shooting) {
-      const ShootingTotals t = shooting->totals();
-      summary["seconds_per_start"] = seconds_sum / o.starts;
-      summary["max_shooting_defect"] = t.largest_shooting_defect;
-      summary["max_defect"] = t.largest_defect;
-      summary["iterations"] = t.iterations;
-    }
-    PrintJson(summary);
-    return;
-  }
-  if (shooting) {
-    const ShootingTotals t = shooting->totals();
-    extra = fmt::format("; {:.2f} s per start (mean), largest continuity defect {:.1e} after the polish "
-                        "({:.1e} before), {} iterations",
-                        seconds_sum / o.starts, t.largest_defect, t.largest_shooting_defect, t.iterations);
-  }
-  fmt::print("{} on the {} task with {} ({}), {} starts: success {}/{} = {:.0f} % (95 % interval {:.0f}-{:.0f} %)\n",
-             o.controller, o.system, o.model.empty() ? o.system : o.model, model_kind, o.starts, successes,
-             o.starts, 100 * rate, 100 * low, 100 * high);
-  fmt::print("cost mean {:.2f}, median {:.2f}, 90th percentile {:.2f}; max |u| {:.3f}; {:.2f} ms per command "
-             "(median), action held {} period(s){}\n",
-             cost_sum / o.starts, Percentile(costs, 0.5), Percentile(costs, 0.9), max_abs_u, ms, controller.hold(),
-             extra);
+  Report(o, task, task.plant.System(), *owned, model_kind, notes);
 }
 
 }  // namespace
@@ -226,7 +271,7 @@ void RegisterControlCommand(CLI::App& app) {
   auto o = std::make_shared<ControlCommandOptions>();
   CLI::App* command = app.add_subcommand("control", "Run a controller on a control task from seeded starts");
   AddCommonOptions(command, o->common);
-  command->add_option("--system", o->system, "Control task: pendulum (swing-up) or cartpole (swing-up)")
+  command->add_option("--system", o->system, "Control task: pendulum (swing-up), cartpole (swing-up) or pushing (the obstacle task of diffdyn push)")
       ->capture_default_str();
   command->add_option("--controller", o->controller,
                       "Controller: mppi (over --model), lqr (the task's model linearised at the goal, clipped) "

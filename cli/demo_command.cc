@@ -7,13 +7,10 @@
 //              (= diffdyn train --model abs-node)
 // 3. push      MPPI (K = 1000, T = 20) over the trained model pushes the block around the
 //              obstacle in the ODE world, a few seeded trials (= diffdyn push --obstacle)
-// 4. identify  a damped pendulum's gravity and damping fitted by Ceres through dopri5 on
-//              Jets (about a second)
 // report.md lists the data, the training curve, the success rate with its interval, the
 // top view of a push, the timings and the commands that redo each stage.
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -23,17 +20,13 @@
 #include <fmt/ostream.h>
 
 #include "command.h"
-#include "diffdyn/autodiff_ode/io.h"
-#include "diffdyn/autodiff_ode/progress.h"
-#include "diffdyn/autodiff_ode/random.h"
-#include "diffdyn/models/learned_model.h"
-#include "diffdyn/physics/pushing_collect.h"
-#include "diffdyn/physics/pushing_csv.h"
-#include "diffdyn/physics/pushing_system.h"
+#include "diffdyn/models/io.h"
+#include "diffdyn/models/progress.h"
+#include "diffdyn/physics/pushing/collect.h"
+#include "diffdyn/physics/pushing/csv.h"
 #include "diffdyn/solvers/dataset_io.h"
-#include "diffdyn/solvers/training.h"
-#include "diffdyn/solvers/pushing_trials.h"
-#include "diffdyn/solvers/trajectory_fit.h"
+#include "diffdyn/solvers/model_training.h"
+#include "diffdyn/solvers/pushing/trials.h"
 #include "plot.h"
 #include "push_command.h"
 
@@ -56,95 +49,8 @@ struct DemoOptions {
   int threads = 0;
 };
 
-// m l^2 qdd + m g l sin q + b qd = 0 with m = 1 kg, l = 0.5 m; theta = (g, b).
-struct DampedPendulum {
-  static constexpr double kLength = 0.5;
-  template <typename T>
-  void operator()(const VectorX<T>& x, VectorX<T>& dxdt, double, const T* theta) const {
-    using std::sin;
-    dxdt[0] = x[1];
-    dxdt[1] = -theta[0] / kLength * sin(x[0]) - theta[1] / (kLength * kLength) * x[1];
-  }
-};
-
-struct PendulumStage {
-  Eigen::Vector2d truth{9.81, 0.02};
-  Eigen::Vector2d initial{7.0, 0.0};
-  std::vector<MeasuredTrajectory> data;
-  TrajectoryFitResult fit;
-};
-
-// Simulates `count` trajectories with rk4 at 1e-4 s (independent of the fit's dopri5)
-// and adds Gaussian noise (0.01 rad, 0.05 rad/s) at 50 Hz.
-std::vector<MeasuredTrajectory> MeasurePendulum(const Eigen::Vector2d& truth, int count,
-                                                double duration, Rng& rng) {
-  std::vector<MeasuredTrajectory> data;
-  const int samples = static_cast<int>(duration * 50) + 1;
-  for (int k = 0; k < count; ++k) {
-    MeasuredTrajectory traj;
-    Eigen::VectorXd x(2);
-    x << Uniform(rng, 0.5, 2.5), Uniform(rng, -1.0, 1.0);
-    traj.states.resize(2, samples);
-    for (int i = 0; i < samples; ++i) traj.times.push_back(i / 50.0);
-    OdeOptions fine;
-    fine.method = Method::kRk4Classic;
-    fine.dt = 1e-4;
-    auto system = [&](const VectorX<double>& s, VectorX<double>& dsdt, double t) {
-      DampedPendulum{}(s, dsdt, t, truth.data());
-    };
-    IntegrateTimes(system, x, traj.times, fine, [&](int i, double, const VectorX<double>& s) {
-      traj.states(0, i) = s[0] + 0.01 * StandardNormal(rng);
-      traj.states(1, i) = s[1] + 0.05 * StandardNormal(rng);
-    });
-    data.push_back(std::move(traj));
-  }
-  return data;
-}
-
-// Writes measured, initial-guess and fitted angle trajectories for the plot.
-void WritePendulumCsv(const std::filesystem::path& path, const PendulumStage& stage) {
-  WriteFileAtomically(path, [&](std::ostream& out) {
-    out << "trajectory,t,q_measured,q_initial,q_fitted\n";
-    for (std::size_t k = 0; k < stage.data.size(); ++k) {
-      const auto& d = stage.data[k];
-      Eigen::MatrixXd predicted[2] = {d.states, d.states};
-      const Eigen::Vector2d thetas[2] = {stage.initial, stage.fit.params};
-      for (int m = 0; m < 2; ++m) {
-        Eigen::VectorXd x = d.states.col(0);
-        auto system = [&](const VectorX<double>& s, VectorX<double>& dsdt, double t) {
-          DampedPendulum{}(s, dsdt, t, thetas[m].data());
-        };
-        IntegrateTimes(system, x, d.times, OdeOptions{},
-                       [&](int i, double, const VectorX<double>& s) { predicted[m].col(i) = s; });
-      }
-      for (std::size_t i = 0; i < d.times.size(); ++i) {
-        fmt::print(out, "{},{:.4f},{:.6f},{:.6f},{:.6f}\n", k, d.times[i], d.states(0, i),
-                   predicted[0](0, i), predicted[1](0, i));
-      }
-    }
-  });
-}
-
 double SecondsSince(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
-// Stage 4: measure the pendulum, then fit through dopri5 on Jets; writes the CSV and plot.
-PendulumStage RunPendulumStage(const DemoOptions& options, const std::filesystem::path& out,
-                               bool* plotted) {
-  Rng rng(options.common.seed);
-  PendulumStage pendulum;
-  pendulum.data = MeasurePendulum(pendulum.truth, options.quick ? 2 : 4,
-                                  options.quick ? 3.0 : 6.0, rng);
-  TrajectoryFitOptions fit_options;
-  fit_options.ode.method = Method::kDopri5;
-  fit_options.ode.abs_tol = fit_options.ode.rel_tol = 1e-9;
-  pendulum.fit = FitTrajectoryParameters<2>(DampedPendulum{}, pendulum.data, pendulum.initial,
-                                            fit_options);
-  WritePendulumCsv(out / "pendulum_fit.csv", pendulum);
-  *plotted = RunPlotScript("demo_pendulum_fit.py", {(out / "pendulum_fit.csv").string(),
-                                                    (out / "pendulum_fit.png").string()});
-  return pendulum;
 }
 
 void WriteTrainingCsv(const std::filesystem::path& path, const TrainResult& result) {
@@ -201,7 +107,7 @@ void RunDemo(const DemoOptions& options) {
   collect.world.obstacle = false;
   CollectStats collect_stats;
   {
-    ProgressBar bar("1/4 collect", options.trajectories, show);
+    ProgressBar bar("1/3 collect", options.trajectories, show);
     collect.progress = [&bar](int done) { bar.Update(done); };
     WritePushingCsvFile(out / "pushes.csv", CollectPushingData(collect, &collect_stats));
   }
@@ -209,23 +115,17 @@ void RunDemo(const DemoOptions& options) {
 
   // Stage 2: the absolute NeuralODE, trained as diffdyn train does (read back from the CSV).
   t0 = Clock::now();
-  LearnedModelConfig config;
-  config.type = LearnedKind::kAbsNode;
-  config.system = PushingSystem();
-  config.method = Method::kRk4;
-  config.steps = 10;
-  config.hidden = 100;
-  config.Validate();
-  const Windows windows = MakeWindows(ReadDataset((out / "pushes.csv").string()), 1);
-  LearnedModel model = LearnedModel::Initialized(config, seed);
+  const Dataset pushes = ReadDataset((out / "pushes.csv").string());
   TrainOptions train;
   train.epochs = options.epochs;
   train.seed = seed;
   train.threads = options.threads;
   train.progress = show;
-  if (show) fmt::print(stderr, "2/4 train: abs-node on {} transitions\n", windows.size());
-  Trainer trainer(&model, train);
-  const TrainResult trained = trainer.Train(windows);
+  if (show) fmt::print(stderr, "2/3 train: abs-node on {} transitions\n", MakeWindows(pushes, 1).size());
+  const FittedModel fit = FitLearnedModel(
+      pushes, {.type = LearnedKind::kAbsNode, .hidden = 100, .method = Method::kRk4, .steps = 10}, train, 1, false);
+  const LearnedModel& model = fit.model;
+  const TrainResult& trained = fit.result;
   const fs::path model_path = out / "abs-node.json";
   SaveLearnedModel(model_path, model,
                    {{"command", "diffdyn demo"}, {"data", (out / "pushes.csv").string()},
@@ -244,8 +144,8 @@ void RunDemo(const DemoOptions& options) {
   t0 = Clock::now();
   PushTrialsSummary pushed;
   {
-    ProgressBar bar("3/4 push", options.trials, show);
-    pushed = RunPushTrials(model, options.trials, task, seed, &bar);
+    ProgressBar bar("3/3 push", options.trials, show);
+    pushed = RunPushTrials(model, options.trials, task, seed, [&bar](int done, int) { bar.Update(done); });
   }
   const fs::path push_dir = out / "push";
   fs::create_directories(push_dir, ec);
@@ -256,31 +156,7 @@ void RunDemo(const DemoOptions& options) {
                                            task.goal_tolerance, push_dir / "top_view.png");
   const double push_seconds = SecondsSince(t0);
 
-  // Stage 4: the pendulum identified through the integrator.
-  t0 = Clock::now();
-  bool pendulum_plotted = false;
-  PendulumStage pendulum;
-  {
-    ProgressBar bar("4/4 pendulum", 1, show);
-    pendulum = RunPendulumStage(options, out, &pendulum_plotted);
-    bar.Update(1);
-  }
-  const double pendulum_seconds = SecondsSince(t0);
   const double total_seconds = SecondsSince(t_start);
-
-  // Pendulum table.
-  const auto& fit = pendulum.fit;
-  const char* names[2] = {"gravity g (m/s^2)", "damping b (N m s/rad)"};
-  nlohmann::json params = nlohmann::json::array();
-  std::string table;
-  for (int i = 0; i < 2; ++i) {
-    const double z = std::abs(fit.params[i] - pendulum.truth[i]) / fit.standard_errors[i];
-    params.push_back({{"name", names[i]}, {"truth", pendulum.truth[i]}, {"initial", pendulum.initial[i]},
-                      {"fitted", fit.params[i]}, {"stderr", fit.standard_errors[i]}, {"z", z}});
-    table += fmt::format("| {} | {:.4g} | {:.4g} | {:.5g} | {:.2g} | {:.2f} |\n", names[i],
-                         pendulum.truth[i], pendulum.initial[i], fit.params[i],
-                         fit.standard_errors[i], z);
-  }
 
   // The commands that redo each stage.
   const std::string data_path = (out / "pushes.csv").string();
@@ -387,20 +263,6 @@ void RunDemo(const DemoOptions& options) {
     }
     fmt::print(s, "```sh\n{}\n```\n\n", redo_push);
 
-    fmt::print(s, "## 4. Identifying a damped pendulum through the integrator\n\n");
-    fmt::print(s,
-               "{} trajectories of a damped pendulum (m = 1 kg, l = 0.5 m) were simulated with "
-               "classic RK4 at 0.1 ms and sampled at 50 Hz with noise of 0.01 rad and 0.05 rad/s. "
-               "Gravity and damping were then fitted by Ceres (Levenberg-Marquardt) through "
-               "dopri5 (tolerance 1e-9) running on Jets, so the Jacobian of every prediction is "
-               "exact; standard errors from sigma^2 (J^T J)^-1.\n\n",
-               pendulum.data.size());
-    fmt::print(s, "| parameter | truth | initial | fitted | std. error | abs(error)/stderr |\n");
-    fmt::print(s, "|---|---|---|---|---|---|\n{}\n", table);
-    fmt::print(s, "RMS residual {:.4g} -> {:.4g} over {} residuals in {} iterations ({}).\n\n",
-               fit.initial_rms, fit.final_rms, fit.num_residuals, fit.iterations, fit.summary);
-    if (pendulum_plotted) fmt::print(s, "![measured and fitted angles](pendulum_fit.png)\n\n");
-
     fmt::print(s, "## Timings\n\n");
     fmt::print(s, "Wall time on this machine ({} threads).\n\n", threads);
     fmt::print(s, "| stage | seconds | detail |\n|---|---|---|\n");
@@ -410,7 +272,6 @@ void RunDemo(const DemoOptions& options) {
                train_seconds, trained.seconds_per_epoch);
     fmt::print(s, "| 3. push | {:.1f} | {:.1f} ms per MPPI command (median) |\n", push_seconds,
                pushed.ms_per_command);
-    fmt::print(s, "| 4. pendulum | {:.1f} | |\n", pendulum_seconds);
     fmt::print(s, "| total | {:.1f} | |\n", total_seconds);
   });
 
@@ -428,10 +289,6 @@ void RunDemo(const DemoOptions& options) {
                 {"ci95_high", pushed.ci95_high}, {"mean_pushes", pushed.mean_pushes},
                 {"ms_per_command", pushed.ms_per_command}, {"outcomes", outcomes},
                 {"seconds", push_seconds}}},
-      {"pendulum_fit", {{"params", params},
-                        {"initial_rms", fit.initial_rms},
-                        {"final_rms", fit.final_rms},
-                        {"converged", fit.converged}}},
       {"seconds", total_seconds}};
   if (options.common.json) {
     PrintJson(summary);
@@ -446,7 +303,6 @@ void RunDemo(const DemoOptions& options) {
              "%), mean pushes {:.2f} ({:.0f} s)\n",
              pushed.successes, pushed.trials, 100 * pushed.success_rate, 100 * pushed.ci95_low,
              100 * pushed.ci95_high, pushed.mean_pushes, push_seconds);
-  fmt::print("4. pendulum identified through dopri5 on Jets ({:.1f} s)\n", pendulum_seconds);
   fmt::print("report: {}\n", (out / "report.md").string());
 }
 

@@ -6,7 +6,7 @@
 #include <fmt/core.h>
 
 #include "command.h"
-#include "diffdyn/physics/ode_engine.h"
+#include "diffdyn/physics/pushing/ode_engine.h"
 #include "diffdyn/solvers/version.h"
 
 namespace diffdyn::cli {

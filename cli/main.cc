@@ -7,7 +7,7 @@
 #include <glog/logging.h>
 
 #include "command.h"
-#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/io.h"
 
 namespace {
 

@@ -23,8 +23,8 @@
 #include <fmt/ostream.h>
 
 #include "command.h"
-#include "diffdyn/autodiff_ode/io.h"
-#include "diffdyn/autodiff_ode/progress.h"
+#include "diffdyn/models/io.h"
+#include "diffdyn/models/progress.h"
 #include "diffdyn/solvers/load_model.h"
 #include "plot.h"
 
@@ -142,7 +142,9 @@ void RunPush(const PushArgs& args) {
 
   ProgressBar bar("push", args.trials, !args.common.quiet);
   const PushTrialsSummary summary =
-      RunPushTrials(*model, args.trials, options, args.common.seed, &bar);
+      RunPushTrials(*model, args.trials, options, args.common.seed, [&bar, &args](int done, int successes) {
+        bar.Update(done, StrCat("trial ", done, "/", args.trials, ", ", successes, " successes"));
+      });
   bar.Finish();
 
   std::string top_view;
@@ -156,8 +158,7 @@ void RunPush(const PushArgs& args) {
   }
 
   const auto counts = OutcomeCounts(summary);
-  int fallbacks = 0;
-  for (const auto& t : summary.runs) fallbacks += t.fallbacks;
+  const int fallbacks = summary.fallbacks;
   if (args.common.json) {
     PrintJson({{"trials", summary.trials},
                {"successes", summary.successes},

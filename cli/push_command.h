@@ -8,8 +8,8 @@
 #include <string>
 
 #include "diffdyn/models/transition_model.h"
-#include "diffdyn/physics/pushing_env.h"
-#include "diffdyn/solvers/pushing_trials.h"
+#include "diffdyn/physics/pushing/env.h"
+#include "diffdyn/solvers/pushing/trials.h"
 
 namespace diffdyn::cli {
 

@@ -15,7 +15,7 @@
 
 #include "command.h"
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/solvers/version.h"
 
 namespace diffdyn::cli {

@@ -20,7 +20,7 @@
 
 #include "command.h"
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/solvers/sweep.h"
 #ifdef DIFFDYN_HAVE_MPI
 #include "diffdyn/solvers/sweep_mpi.h"

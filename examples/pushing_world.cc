@@ -22,8 +22,8 @@
 #include <fmt/core.h>
 #include <fmt/os.h>
 
-#include "diffdyn/autodiff_ode/io.h"
-#include "diffdyn/physics/pushing_collect.h"
+#include "diffdyn/models/io.h"
+#include "diffdyn/physics/pushing/collect.h"
 
 namespace {
 

@@ -18,8 +18,8 @@
 
 #include <fmt/core.h>
 
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/init.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/solvers/residual_solver.h"
 
 namespace {

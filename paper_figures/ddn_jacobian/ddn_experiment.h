@@ -33,11 +33,11 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/adam.h"
 #include "diffdyn/models/init.h"
 #include "diffdyn/models/losses.h"
 #include "diffdyn/models/mlp.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn::ddn_figure {
 

@@ -13,9 +13,9 @@
 #include <CLI/CLI.hpp>
 
 #include "ddn_experiment.h"
-#include "diffdyn/autodiff_ode/io.h"
-#include "diffdyn/autodiff_ode/progress.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/models/model_file.h"
+#include "diffdyn/models/progress.h"
 #include "../figure_main.h"
 
 namespace fs = std::filesystem;

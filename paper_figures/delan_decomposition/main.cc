@@ -38,9 +38,9 @@
 #include <CLI/CLI.hpp>
 
 #include "../figure_main.h"
-#include "diffdyn/autodiff_ode/io.h"
 #include "diffdyn/models/delan.h"
 #include "diffdyn/models/init.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/physics/control_task.h"
 #include "diffdyn/solvers/control.h"
 #include "diffdyn/solvers/dataset_io.h"

@@ -30,7 +30,7 @@
 #include <CLI/CLI.hpp>
 
 #include "../figure_main.h"
-#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/solvers/hjb.h"
 #include "diffdyn/solvers/lqr.h"
 #include "diffdyn/solvers/multiple_shooting.h"

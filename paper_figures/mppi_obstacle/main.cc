@@ -8,7 +8,7 @@
 //    loss, Adam, batch 500, 80/20 split; abs-nn, res-nn, abs-node lr 1e-3; res-node
 //    lr 1e-2; NeuralODEs rk4 3/8 rule on 10 grid points).
 // 3. Runs seeded obstacle trials of MPPI (K = 1000, T = 20) with each model, executed
-//    in the ODE world (solvers/pushing_trials.h), plus an oracle row: the simulation
+//    in the ODE world (solvers/pushing/trials.h), plus an oracle row: the simulation
 //    itself as MPPI's model (K = 100, T = 10), which separates model error from
 //    controller error. The cost is the seed's plus a safety margin and a swept test
 //    over each predicted push (--collision-margin, --collision-substeps; 0 and 0 give
@@ -28,14 +28,14 @@
 #include <CLI/CLI.hpp>
 #include <fmt/core.h>
 
-#include "diffdyn/autodiff_ode/io.h"
-#include "diffdyn/autodiff_ode/progress.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/models/learned_model.h"
-#include "diffdyn/physics/pushing_collect.h"
-#include "diffdyn/physics/pushing_oracle.h"
-#include "diffdyn/physics/pushing_system.h"
-#include "diffdyn/solvers/pushing_trials.h"
+#include "diffdyn/models/progress.h"
+#include "diffdyn/physics/pushing/collect.h"
+#include "diffdyn/physics/pushing/oracle.h"
+#include "diffdyn/physics/pushing/system.h"
 #include "diffdyn/solvers/dataset_io.h"
+#include "diffdyn/solvers/pushing/trials.h"
 #include "diffdyn/solvers/training.h"
 #include "../figure_main.h"
 
@@ -174,7 +174,7 @@ Row RunTrials(const std::string& name, const TransitionModel& model, int trials,
   task.reach_weight = o.reach_weight;
   task.reach_limited = o.reach_limited;
   ProgressBar bar("trials " + name, trials, !o.quiet);
-  Row row{name, samples, horizon, RunPushTrials(model, trials, task, o.seed, &bar)};
+  Row row{name, samples, horizon, RunPushTrials(model, trials, task, o.seed, [&bar](int done, int) { bar.Update(done); })};
   bar.Finish();
   const auto& s = row.summary;
   if (!o.quiet) {

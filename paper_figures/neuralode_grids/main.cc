@@ -35,10 +35,10 @@
 #include <CLI/CLI.hpp>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/io.h"
-#include "diffdyn/autodiff_ode/parallel.h"
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/models/learned_model.h"
+#include "diffdyn/models/parallel.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/training.h"
 #include "../figure_main.h"

@@ -16,7 +16,7 @@
 #include "arrays.h"
 #include "bindings.h"
 #include "diffdyn/autodiff_ode/butcher.h"
-#include "diffdyn/autodiff_ode/parallel.h"
+#include "diffdyn/models/parallel.h"
 #include "diffdyn/solvers/load_model.h"
 
 namespace diffdyn::python {

@@ -21,12 +21,12 @@
 namespace diffdyn::python {
 namespace {
 
-// The evaluator's starts (DrawStarts): (count, n).
+// The evaluator's starts (Task::Starts): (count, n).
 py::array_t<double> SampleStarts(const ControlTask& task, int count, std::uint64_t seed) {
   DIFFDYN_CHECK(count >= 1 && count <= 100000, "sample_starts: count must be in [1, 100000], got ", count);
-  const std::vector<Eigen::VectorXd> starts = DrawStarts(task, count, seed);
+  const std::vector<TaskStart> starts = task.Starts(count, seed);
   Eigen::MatrixXd columns(task.state_size(), count);
-  for (int s = 0; s < count; ++s) columns.col(s) = starts[static_cast<std::size_t>(s)];
+  for (int s = 0; s < count; ++s) columns.col(s) = starts[static_cast<std::size_t>(s)].x0;
   return FromColumns(columns);
 }
 

@@ -1,13 +1,13 @@
 #include "diffdyn/solvers/control.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <mutex>
 #include <string>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/parallel.h"
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/parallel.h"
 
 namespace diffdyn {
 namespace {
@@ -18,50 +18,44 @@ double MillisecondsSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-// One run of `controller` from x0 on `plant` (one control period per step).
-ControlRun RunFrom(const ControlTask& task, const TransitionModel& plant, Controller& controller,
-                   const Eigen::VectorXd& x0, std::uint64_t seed) {
-  const Clock::time_point start = Clock::now();
-  const int periods = task.periods(), n = task.state_size(), m = task.action_size();
+}  // namespace
+
+ControlRun RunEpisode(const Task& task, Controller& controller, const TaskStart& start) {
+  const Clock::time_point begin = Clock::now();
+  const int max_steps = task.max_steps(), n = task.state_size(), m = task.action_size();
   ControlRun run;
-  run.x0 = x0;
-  Trajectory& tr = run.trajectory;
-  tr.t = Eigen::VectorXd::LinSpaced(periods + 1, 0.0, periods * task.period);
-  tr.states.resize(n, periods + 1);
-  tr.actions.resize(m, periods);
-  tr.states.col(0) = x0;
-  controller.Reset(x0, seed);
-  auto ws = plant.MakeWorkspace(1);
+  run.x0 = start.x0;
+  Eigen::MatrixXd states(n, max_steps + 1), actions(m, max_steps);
+  const std::unique_ptr<TaskRun> plant = task.Begin();
+  states.col(0) = plant->Reset(start.x0);
+  controller.Reset(states.col(0), start.seed);
   Eigen::VectorXd u = Eigen::VectorXd::Zero(m), next(n);
-  bool left_limits = false;
-  for (int k = 0; k < periods; ++k) {
-    const Eigen::VectorXd x = tr.states.col(k);
-    if (k % controller.hold() == 0) {
+  int steps = 0;
+  for (; steps < max_steps && run.outcome.empty(); ++steps) {
+    const Eigen::VectorXd x = states.col(steps);
+    if (steps % controller.hold() == 0) {
       const Clock::time_point command = Clock::now();
       u = task.Clip(controller.Command(x));
       run.command_ms.push_back(MillisecondsSince(command));
-      if (!u.allFinite()) throw NumericalError(StrCat("control: the controller returned a non-finite action at t = ", tr.t[k], " s"));
+      if (!u.allFinite()) {
+        throw NumericalError(StrCat("control: the controller returned a non-finite action at step ", steps));
+      }
     }
-    tr.actions.col(k) = u;
-    run.cost += task.period * task.RunningCost(x, u);
+    const StepOutcome step = plant->Step(u, &next);
+    actions.col(steps) = u;
+    states.col(steps + 1) = next;
+    run.cost += step.cost;
     run.max_abs_u = std::max(run.max_abs_u, u.cwiseAbs().maxCoeff());
-    plant.PredictBatch(x, u, next, *ws);
-    if (!next.allFinite()) throw NumericalError(StrCat("control: the plant's state became non-finite at t = ", tr.t[k + 1], " s"));
-    tr.states.col(k + 1) = next;
-    left_limits = left_limits || task.OutOfLimits(next);
+    if (step.done) run.outcome = step.outcome;
   }
-  run.success = !left_limits && task.Succeeded(tr.states.col(periods));
-  run.seconds = MillisecondsSince(start) / 1000.0;
+  if (run.outcome.empty()) run.outcome = plant->Finish();
+  run.success = run.outcome == "success";
+  Trajectory& tr = run.trajectory;
+  tr.t = Eigen::VectorXd::LinSpaced(steps + 1, 0.0, steps * task.step_period());
+  tr.states = states.leftCols(steps + 1);
+  tr.actions = actions.leftCols(steps);
+  run.seconds = MillisecondsSince(begin) / 1000.0;
   return run;
-}
-
-}  // namespace
-
-std::vector<Eigen::VectorXd> DrawStarts(const ControlTask& task, int count, std::uint64_t seed) {
-  Rng rng(seed);
-  std::vector<Eigen::VectorXd> starts;
-  for (int s = 0; s < count; ++s) starts.push_back(task.SampleStart(rng));
-  return starts;
 }
 
 int PeriodsPerStep(double dt, double period, const std::string& what) {
@@ -74,27 +68,24 @@ int PeriodsPerStep(double dt, double period, const std::string& what) {
   return static_cast<int>(whole);
 }
 
-std::vector<ControlRun> EvaluateController(const ControlTask& task, Controller& controller,
+std::vector<ControlRun> EvaluateController(const Task& task, Controller& controller,
                                            const EvaluationOptions& options) {
   DIFFDYN_CHECK(options.starts >= 1, "--starts must be >= 1, got ", options.starts);
-  const std::vector<Eigen::VectorXd> starts = DrawStarts(task, options.starts, options.seed);
+  const std::vector<TaskStart> starts = task.Starts(options.starts, options.seed);
   std::vector<ControlRun> runs(static_cast<std::size_t>(options.starts));
-  auto seed_of = [&](int s) {
-    return SplitMix64Hash(SplitMix64Hash(options.seed) ^ static_cast<std::uint64_t>(s));
-  };
-  // One chunk per start; a clone of the controller and a plant per chunk when the
-  // controller can be cloned, else the caller's controller on one thread.
+  // One chunk per start; a clone of the controller per chunk when the controller
+  // can be cloned, else the caller's controller on one thread.
   const bool parallel = ResolveThreads(options.threads) > 1 && options.starts > 1 && controller.Clone() != nullptr;
   std::mutex progress_mutex;
-  int finished = 0;
+  int finished = 0, successes = 0;
   ParallelForChunks(options.starts, 1, parallel ? options.threads : 1, [&](int, int s, int) {
-    const auto plant = TaskModel(task, task.period, 4);
     std::unique_ptr<Controller> clone = parallel ? controller.Clone() : nullptr;
     const auto i = static_cast<std::size_t>(s);
-    runs[i] = RunFrom(task, *plant, clone ? *clone : controller, starts[i], seed_of(s));
+    runs[i] = RunEpisode(task, clone ? *clone : controller, starts[i]);
     if (options.progress) {
       const std::lock_guard<std::mutex> lock(progress_mutex);
-      options.progress(++finished);
+      successes += runs[i].success ? 1 : 0;
+      options.progress(++finished, successes);
     }
   });
   return runs;

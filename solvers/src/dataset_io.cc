@@ -5,8 +5,8 @@
 #include <fstream>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/physics/pushing_csv.h"
-#include "diffdyn/physics/pushing_system.h"
+#include "diffdyn/physics/pushing/csv.h"
+#include "diffdyn/physics/pushing/system.h"
 
 namespace diffdyn {
 namespace {

@@ -5,7 +5,7 @@
 #include <limits>
 #include <numbers>
 
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/physics/model_registry.h"
 
 namespace diffdyn {

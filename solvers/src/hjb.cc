@@ -6,8 +6,8 @@
 #include <limits>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/init.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 

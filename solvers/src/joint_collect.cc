@@ -7,8 +7,8 @@
 #include <thread>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/parallel.h"
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/parallel.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

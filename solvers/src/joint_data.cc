@@ -10,7 +10,7 @@
 #include <sstream>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/models/trajectory.h"
 
 namespace diffdyn {

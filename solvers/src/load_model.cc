@@ -3,13 +3,13 @@
 #include <filesystem>
 #include <utility>
 
-#include "diffdyn/autodiff_ode/io.h"
 #include "diffdyn/models/delan.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/models/learned_model.h"
 #include "diffdyn/models/model_file.h"
 #include "diffdyn/physics/effects.h"
 #include "diffdyn/physics/model_registry.h"
-#include "diffdyn/physics/pushing_oracle.h"
+#include "diffdyn/physics/pushing/oracle.h"
 #include "diffdyn/solvers/extended_model_file.h"
 
 namespace diffdyn {

@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <sstream>
 
-#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/physics/model_registry.h"
 #include "diffdyn/solvers/diagnosis/candidates.h"
 #include "diffdyn/solvers/extended_model_file.h"

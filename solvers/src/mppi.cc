@@ -6,7 +6,7 @@
 #include <limits>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/parallel.h"
+#include "diffdyn/models/parallel.h"
 
 namespace diffdyn {
 

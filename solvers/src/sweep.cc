@@ -19,7 +19,7 @@
 #include <system_error>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/models/json_io.h"
 
 extern char** environ;

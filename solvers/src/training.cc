@@ -7,11 +7,11 @@
 #include <numeric>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/parallel.h"
-#include "diffdyn/autodiff_ode/progress.h"
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/adam.h"
 #include "diffdyn/models/losses.h"
+#include "diffdyn/models/parallel.h"
+#include "diffdyn/models/progress.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/models/state_loss.h"
 
 namespace diffdyn {

@@ -10,7 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "diffdyn/autodiff_ode/jacobian.h"
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

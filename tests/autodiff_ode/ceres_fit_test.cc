@@ -8,8 +8,8 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/autodiff_ode/sensitivity.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

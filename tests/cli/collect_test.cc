@@ -8,7 +8,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include "diffdyn/physics/pushing_csv.h"
+#include "diffdyn/physics/pushing/csv.h"
 #include "run_diffdyn.h"
 
 namespace {

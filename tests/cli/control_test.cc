@@ -51,11 +51,30 @@ TEST(Control, PlansWithALearnedModelAtItsDataInterval) {
   EXPECT_EQ(nlohmann::json::parse(r.out)["hold"].get<int>(), 5);  // 40 ms = 5 periods
 }
 
+TEST(Control, PushingIsATaskOfTheSameEvaluator) {
+  const std::string out = TempPath("control_pushing");
+  std::filesystem::remove_all(out);
+  const auto r = RunDiffdyn("control --system pushing --starts 1 --samples 4 --seed 3 --quiet --json --out " + out);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["system"], "pushing");
+  EXPECT_EQ(j["model_kind"], "oracle");
+  EXPECT_EQ(j["starts"].get<int>(), 1);
+  EXPECT_GE(j["mean_cost"].get<double>(), 0.0);
+  std::ifstream starts(out + "/starts.csv");
+  std::string header;
+  std::getline(starts, header);
+  EXPECT_EQ(header, "start,x0_1,x0_2,x0_3,success,cost,max_abs_u,seconds");
+  std::ifstream trajectory(out + "/trajectories/start_0.csv");
+  std::getline(trajectory, header);
+  EXPECT_EQ(header.substr(0, 9), "t,x,y,the") << header;
+}
+
 TEST(Control, BadOptionsAreOneLineErrorsAndWriteNothing) {
   const std::string out = TempPath("control_bad");
   for (const auto& [args, fragment] : std::vector<std::pair<std::string, std::string>>{
            {"--system robot", "--system"},
-           {"--system pushing", "--system"},
+           {"--system pushing --controller lqr", "--controller"},
            {"--dt 0.01", "--dt"},
            {"--dt -1", "--dt"},
            {"--starts 0", "--starts"},

@@ -9,9 +9,9 @@
 #include <Eigen/Core>
 #include <ceres/jet.h>
 
-#include "diffdyn/autodiff_ode/parallel.h"
-#include "diffdyn/autodiff_ode/random.h"
-#include "diffdyn/physics/ode_engine.h"
+#include "diffdyn/models/parallel.h"
+#include "diffdyn/models/random.h"
+#include "diffdyn/physics/pushing/ode_engine.h"
 #include "diffdyn/solvers/joint_data.h"
 #include "diffdyn/solvers/load_model.h"
 #include "diffdyn/solvers/version.h"

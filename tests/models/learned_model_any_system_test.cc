@@ -13,8 +13,8 @@
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/learned_model.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

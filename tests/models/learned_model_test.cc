@@ -12,7 +12,7 @@
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

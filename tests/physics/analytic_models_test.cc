@@ -8,7 +8,7 @@
 #include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/physics/effects.h"
 #include "diffdyn/physics/model_registry.h"
 #include "diffdyn/physics/panda_dynamics.h"

@@ -10,8 +10,8 @@
 #include <ceres/jet.h>
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/autodiff_ode/sensitivity.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/physics/analytic_model.h"
 #include "diffdyn/physics/simple_models.h"
 

@@ -1,15 +1,59 @@
 // The control evaluator and MPPI on control tasks: the evaluator's cost is the
 // task's integral, the plant conserves the undamped pendulum's energy, actions are
 // held and clipped, runs are deterministic at any thread count, refusals name the
-// option, and MPPI over the analytic pendulum swings it up.
+// option, and MPPI over the analytic pendulum swings it up. A counting task checks
+// the evaluator's own rules on any Task: a step that reports done ends the run with
+// its outcome, else Finish names it, costs add up, the trajectory holds the steps run.
 #include "diffdyn/solvers/control.h"
 
 #include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
 namespace diffdyn {
 namespace {
+
+// x_{k+1} = x_k + u_k on one state; the run ends "success" on reaching `target`
+// (a step reports done), else Finish says "short"; cost per step = |u|.
+class CountingTask final : public Task {
+ public:
+  explicit CountingTask(double target) : target_(target) {}
+  int state_size() const override { return 1; }
+  int action_size() const override { return 1; }
+  double step_period() const override { return 0.5; }
+  int max_steps() const override { return 6; }
+  Eigen::VectorXd Clip(const Eigen::Ref<const Eigen::VectorXd>& u) const override {
+    return u.cwiseMin(1.0).cwiseMax(-1.0);
+  }
+  std::vector<TaskStart> Starts(int count, std::uint64_t seed) const override {
+    std::vector<TaskStart> starts;
+    for (int s = 0; s < count; ++s) starts.push_back({Eigen::VectorXd::Constant(1, s), seed + s});
+    return starts;
+  }
+  std::unique_ptr<TaskRun> Begin() const override { return std::make_unique<Run>(target_); }
+
+ private:
+  class Run final : public TaskRun {
+   public:
+    explicit Run(double target) : target_(target) {}
+    Eigen::VectorXd Reset(const Eigen::VectorXd& x0) override { return x_ = x0; }
+    StepOutcome Step(const Eigen::VectorXd& u, Eigen::VectorXd* x) override {
+      x_ += u;
+      *x = x_;
+      const bool reached = x_[0] >= target_;
+      return {std::abs(u[0]), reached, reached ? "success" : ""};
+    }
+    std::string Finish() override { return "short"; }
+
+   private:
+    double target_;
+    Eigen::VectorXd x_;
+  };
+  double target_;
+};
 
 // Returns a constant action, counts its calls.
 class ConstantController final : public Controller {
@@ -116,6 +160,33 @@ TEST(MppiController, SwingsThePendulumUpTheSameWayOnAnyThreadCount) {
     successes += a[s].success ? 1 : 0;
   }
   EXPECT_EQ(successes, 2) << "costs " << a[0].cost << ", " << a[1].cost;
+}
+
+TEST(EvaluateController, AnyTaskEndsOnDoneOrAtTheStepLimit) {
+  const CountingTask task(4.0);
+  ConstantController push(2.0, 2);  // clipped to 1, commanded every second step
+  const std::vector<ControlRun> runs = EvaluateController(task, push, {.starts = 3, .seed = 7});
+  ASSERT_EQ(runs.size(), 3u);
+  // From 0: reaches 4 after 4 steps; from 1: after 3; from 2: after 2 (done ends the run).
+  for (int s = 0; s < 3; ++s) {
+    const ControlRun& r = runs[static_cast<std::size_t>(s)];
+    const int steps = 4 - s;
+    EXPECT_EQ(r.outcome, "success");
+    EXPECT_TRUE(r.success);
+    EXPECT_EQ(r.trajectory.transitions(), steps);
+    EXPECT_DOUBLE_EQ(r.cost, steps * 1.0);
+    EXPECT_DOUBLE_EQ(r.max_abs_u, 1.0);
+    EXPECT_DOUBLE_EQ(r.trajectory.t[steps], 0.5 * steps);
+    EXPECT_DOUBLE_EQ(r.trajectory.states(0, steps), 4.0);
+    EXPECT_EQ(r.command_ms.size(), static_cast<std::size_t>((steps + 1) / 2));
+  }
+  // Out of reach within 6 steps: Finish names the outcome, every step is run.
+  const CountingTask far(100.0);
+  const ControlRun r = EvaluateController(far, push, {.starts = 1, .seed = 7})[0];
+  EXPECT_EQ(r.outcome, "short");
+  EXPECT_FALSE(r.success);
+  EXPECT_EQ(r.trajectory.transitions(), 6);
+  EXPECT_EQ(r.trajectory.states.cols(), 7);
 }
 
 }  // namespace

@@ -6,7 +6,7 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/solvers/pushing_cost.h"
+#include "diffdyn/solvers/pushing/cost.h"
 #include "toy_models.h"
 
 namespace diffdyn {

@@ -8,8 +8,8 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/init.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

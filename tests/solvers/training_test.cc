@@ -17,12 +17,12 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/continuous_model.h"
 #include "diffdyn/models/learned_model.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/models/state_loss.h"
-#include "diffdyn/physics/pushing_csv.h"
-#include "diffdyn/physics/pushing_system.h"
+#include "diffdyn/physics/pushing/csv.h"
+#include "diffdyn/physics/pushing/system.h"
 #include "diffdyn/solvers/dataset_io.h"
 
 namespace diffdyn {

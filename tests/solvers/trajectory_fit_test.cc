@@ -5,7 +5,7 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <tuple>
 
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/solvers/diagnosis/refit.h"
 
 namespace diffdyn {

@@ -8,7 +8,7 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/physics/model_registry.h"
 #include "diffdyn/solvers/extended_model_file.h"
 #include "diffdyn/solvers/hidden_effects.h"

@@ -55,7 +55,6 @@
 #include <Eigen/Eigenvalues>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/parallel.h"
 #include "diffdyn/autodiff_ode/spd_solve.h"
 #include "diffdyn/models/activations.h"
 #include "diffdyn/models/init.h"
@@ -63,6 +62,7 @@
 #include "diffdyn/models/json_io.h"
 #include "diffdyn/models/mlp.h"
 #include "diffdyn/models/model_file.h"
+#include "diffdyn/models/parallel.h"
 
 namespace diffdyn {
 

@@ -22,7 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/io.h"
 
 namespace diffdyn {
 

@@ -23,7 +23,7 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 

@@ -52,10 +52,10 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/parallel.h"
 #include "diffdyn/models/activations.h"
 #include "diffdyn/models/gemm.h"
 #include "diffdyn/models/layer_kernel.h"
+#include "diffdyn/models/parallel.h"
 
 namespace diffdyn {
 

@@ -47,7 +47,7 @@
 #include <nlohmann/json.hpp>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/models/mlp.h"
 #include "diffdyn/models/system_description.h"
 

@@ -18,6 +18,12 @@
 // over any whole number of control periods: the evaluator's plant and the analytic
 // model a controller plans with.
 //
+// As a Task (task.h): one step per control period on TaskModel(task, period, 4)
+// (rk4-classic, 4 substeps), step cost period * c(x_k, u_k), run s starting at the
+// s-th draw of Rng(seed) from the start box with controller seed
+// SplitMix64Hash(SplitMix64Hash(seed) ^ s); a run whose state leaves the limits fails
+// ("left_limits", judged at the end), else "success" or "failed" by the success test.
+//
 //   name       plant                                 starts                          success
 //   pendulum   JointTask "pendulum" (m 0.75, l 2/3)  theta ~ U(-pi, pi), |qd| < 0.01  |theta| < 0.1, |qd| < 0.5
 //   cartpole   JointTask "cartpole" (cart pushed)    |x| < 0.1, theta ~ pi +- 0.1     |theta| < 0.1, |thetad| < 0.5,
@@ -30,7 +36,9 @@
 #pragma once
 
 #include <cmath>
+#include <cstdint>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <string>
 #include <vector>
@@ -38,10 +46,11 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/continuous_model.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/models/transition_model.h"
 #include "diffdyn/physics/joint_task.h"
+#include "diffdyn/physics/task.h"
 
 namespace diffdyn {
 
@@ -79,7 +88,7 @@ struct ActionCost {
 };
 
 /// A control task (see the file comment). Sizes: n states (2 x joints), m actions.
-struct ControlTask {
+struct ControlTask : public Task {
   /// The plant: model, parameters, effects, actuated joints, torque bounds.
   JointTask plant;
   /// Control period and run length (s).
@@ -100,10 +109,15 @@ struct ControlTask {
   Eigen::VectorXd domain_low, domain_high;
 
   /// n and m.
-  int state_size() const { return static_cast<int>(goal.size()); }
-  int action_size() const { return static_cast<int>(plant.actuated.size()); }
+  int state_size() const override { return static_cast<int>(goal.size()); }
+  int action_size() const override { return static_cast<int>(plant.actuated.size()); }
   /// The number of control periods of a run.
   int periods() const { return static_cast<int>(std::lround(duration / period)); }
+  /// Task: one step per control period.
+  double step_period() const override { return period; }
+  int max_steps() const override { return periods(); }
+  std::vector<TaskStart> Starts(int count, std::uint64_t seed) const override;
+  std::unique_ptr<TaskRun> Begin() const override;
 
   /// The distance of component i from the goal: wrapped to (-pi, pi] when periodic.
   double Deviation(int i, double value) const {
@@ -130,7 +144,7 @@ struct ControlTask {
   }
 
   /// u clipped to the task's torque bounds.
-  Eigen::VectorXd Clip(const Eigen::Ref<const Eigen::VectorXd>& u) const {
+  Eigen::VectorXd Clip(const Eigen::Ref<const Eigen::VectorXd>& u) const override {
     return u.cwiseMax(-plant.bound).cwiseMin(plant.bound);
   }
 

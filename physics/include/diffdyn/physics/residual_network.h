@@ -25,8 +25,8 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/mlp.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/physics/analytic_model.h"
 
 namespace diffdyn {

@@ -1,13 +1,19 @@
 // One evaluator for every controller on every control task, and MPPI over any
 // transition model with the task's cost.
 //
-// EvaluateController runs a Controller on the task's plant (TaskModel: rk4-classic,
-// 4 substeps per control period) from `starts` seeded start states (start s is the
-// s-th draw of Rng(seed) from the task's start box) and measures each run the same way:
+// EvaluateController runs a Controller on any Task (physics/task.h) from its seeded
+// starts (task.Starts(starts, seed)): each run gets its own plant (task.Begin()), the
+// controller is Reset at the start with the run's seed, and the run steps until a
+// step ends it or task.max_steps() steps have passed. Every run is measured the same
+// way: the sum of the step costs, the outcome ("success" or how it failed), max |u|,
+// wall time, and the milliseconds of every Command call. On a ControlTask
+// (physics/control_task.h) this is
 //
 //   cost    = sum_{k < K} period * c(x_k, clip(u_k)),   K = duration / period,
 //   success = task.Succeeded(x_K) and no state limit broken on the way,
-//   max |u| over the run, wall time, and the milliseconds of every Command call.
+//
+// with TaskModel (rk4-classic, 4 substeps per control period) as the plant; on the
+// pushing task (solvers/pushing/trials.h) one push per step in the ODE world.
 //
 // Starts run on `threads` threads when the controller can be cloned (Clone); the runs
 // do not depend on the thread count.
@@ -32,6 +38,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -39,6 +46,7 @@
 #include "diffdyn/models/trajectory.h"
 #include "diffdyn/models/transition_model.h"
 #include "diffdyn/physics/control_task.h"
+#include "diffdyn/physics/task.h"
 #include "diffdyn/solvers/mppi.h"
 
 namespace diffdyn {
@@ -62,12 +70,15 @@ class Controller {
 struct ControlRun {
   Eigen::VectorXd x0;
   bool success = false;
+  /// "success" or how the run failed (the task's names, e.g. "failed", "left_limits",
+  /// "obstacle_contact", "max_steps").
+  std::string outcome;
   double cost = 0.0;
   double max_abs_u = 0.0;
   double seconds = 0.0;
   /// Milliseconds of each Command call.
   std::vector<double> command_ms;
-  /// t, states (n x (K + 1)), clipped actions (m x K).
+  /// t (k step periods), states (n x (K + 1)), clipped actions (m x K) of the K steps run.
   Trajectory trajectory;
 };
 
@@ -77,17 +88,18 @@ struct EvaluationOptions {
   std::uint64_t seed = 0;
   /// Threads running starts at once when the controller can be cloned (<= 0: all cores).
   int threads = 1;
-  /// Called with the number of finished runs.
-  std::function<void(int)> progress{};
+  /// Called with the number of finished runs and the successes among them.
+  std::function<void(int done, int successes)> progress{};
 };
 
-/// The `count` seeded starts of an evaluation: start s is the s-th draw of Rng(seed)
-/// from the task's start box (n each).
-std::vector<Eigen::VectorXd> DrawStarts(const ControlTask& task, int count, std::uint64_t seed);
+/// One run of `controller` on `task` from `start` (file comment). Throws
+/// diffdyn::NumericalError when the plant's state or the controller's action
+/// becomes non-finite.
+ControlRun RunEpisode(const Task& task, Controller& controller, const TaskStart& start);
 
-/// Runs `controller` from each seeded start (file comment). Throws
-/// diffdyn::NumericalError when the plant's state becomes non-finite.
-std::vector<ControlRun> EvaluateController(const ControlTask& task, Controller& controller,
+/// Runs `controller` from each of the task's first `options.starts` seeded starts
+/// (file comment), in start order.
+std::vector<ControlRun> EvaluateController(const Task& task, Controller& controller,
                                            const EvaluationOptions& options);
 
 /// Settings of MppiController (MppiOptions' horizon and noise set from these).

@@ -2,8 +2,8 @@
 // datasets of shared/data/, all into the one Dataset type (models/trajectory.h).
 //
 //   file or folder                    system                       trajectories
-//   pushing CSV (header               pushing (physics/            one per trajectory
-//     trajectory,step,x,y,theta,...)    pushing_system.h)            number, t_k = k
+//   pushing CSV (header               pushing (physics/pushing/    one per trajectory
+//     trajectory,step,x,y,theta,...)    system.h)                    number, t_k = k
 //   joint-space CSV (t, q, qd, tau,   joint space: x = (q, qd),    one per `trajectory`
 //     ...; solvers/joint_data.h)        u = the actuated tau         value (or t restart)
 //   panda_gaz2019_traj1/, DeLaN       joint space                  its segments

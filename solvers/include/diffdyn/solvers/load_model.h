@@ -25,7 +25,7 @@
 
 #include "diffdyn/models/continuous_model.h"
 #include "diffdyn/models/transition_model.h"
-#include "diffdyn/physics/pushing_env.h"
+#include "diffdyn/physics/pushing/env.h"
 
 namespace diffdyn {
 

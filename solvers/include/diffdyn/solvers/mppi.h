@@ -46,7 +46,7 @@
 
 #include <Eigen/Core>
 
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/models/transition_model.h"
 
 namespace diffdyn {

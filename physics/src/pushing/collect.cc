@@ -1,4 +1,4 @@
-#include "diffdyn/physics/pushing_collect.h"
+#include "diffdyn/physics/pushing/collect.h"
 
 #include <algorithm>
 #include <atomic>
@@ -6,7 +6,7 @@
 #include <thread>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/parallel.h"
+#include "diffdyn/models/parallel.h"
 
 namespace diffdyn {
 namespace {

@@ -1,6 +1,6 @@
 // The pushing CSV: exact round trip, files with and without `status`, ragged
 // files rejected with file and line, and the shared PyBullet data read as described.
-#include "diffdyn/physics/pushing_csv.h"
+#include "diffdyn/physics/pushing/csv.h"
 
 #include <filesystem>
 #include <fstream>
@@ -9,7 +9,7 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

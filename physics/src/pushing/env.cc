@@ -1,4 +1,4 @@
-#include "diffdyn/physics/pushing_env.h"
+#include "diffdyn/physics/pushing/env.h"
 
 #include <ode/ode.h>
 
@@ -11,8 +11,8 @@
 #include <Eigen/Geometry>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/physics/ode_engine.h"
-#include "diffdyn/physics/panda_ik.h"
+#include "diffdyn/physics/pushing/ode_engine.h"
+#include "diffdyn/physics/pushing/panda_ik.h"
 
 namespace diffdyn {
 namespace {

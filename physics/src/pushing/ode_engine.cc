@@ -1,4 +1,4 @@
-#include "diffdyn/physics/ode_engine.h"
+#include "diffdyn/physics/pushing/ode_engine.h"
 
 #include <ode/ode.h>
 

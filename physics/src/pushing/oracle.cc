@@ -1,4 +1,4 @@
-#include "diffdyn/physics/pushing_oracle.h"
+#include "diffdyn/physics/pushing/oracle.h"
 
 #include "diffdyn/autodiff_ode/check.h"
 

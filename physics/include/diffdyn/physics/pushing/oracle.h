@@ -15,8 +15,8 @@
 #include <string>
 
 #include "diffdyn/models/transition_model.h"
-#include "diffdyn/physics/pushing_env.h"
-#include "diffdyn/physics/pushing_system.h"
+#include "diffdyn/physics/pushing/env.h"
+#include "diffdyn/physics/pushing/system.h"
 
 namespace diffdyn {
 

@@ -1,14 +1,14 @@
 // ReachLimitedModel: the inner model's prediction where the arm reaches the push,
 // the unchanged pose where it does not.
-#include "diffdyn/physics/reach_limited_model.h"
+#include "diffdyn/physics/pushing/reach_limited_model.h"
 
 #include <memory>
 #include <string>
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
 #include "diffdyn/models/learned_model.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {

@@ -10,8 +10,8 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/physics/pushing_collect.h"
-#include "diffdyn/physics/pushing_csv.h"
+#include "diffdyn/physics/pushing/collect.h"
+#include "diffdyn/physics/pushing/csv.h"
 
 namespace diffdyn {
 namespace {

@@ -1,6 +1,9 @@
 // Pushing trials: MPPI over a transition model, executed in the ODE-engine world.
 //
-// A trial puts the block at the task's start pose plus a seeded perturbation
+// The pushing task is a Task (physics/task.h) like the swing-up tasks, so the one
+// evaluator (EvaluateController, solvers/control.h) runs it: PushingTask is the
+// plant, starts and success test below, PushingMppiController the planner, and
+// RunPushTrials the series `diffdyn push` reports. A trial puts the block at the task's start pose plus a seeded perturbation
 // (uniform in a disc of radius start_xy_jitter and in +-start_theta_jitter),
 // then repeats: MPPI (solvers/mppi.h) plans with `model` from the block's true
 // pose, the first action is executed by PushingEnv (the ODE world), and the
@@ -14,13 +17,13 @@
 //
 // Tasks (the NeuralODE-Panda seed's):
 //   obstacle  start (0.4, 0, -0.2 pi), goal (0.8, -0.1, 0), cost with 100 x in_collision
-//             (solvers/pushing_cost.h; collision_margin and collision_substeps add the
+//             (solvers/pushing/cost.h; collision_margin and collision_substeps add the
 //             margin and the swept test, both 0 = the seed's cost; clearance adds an
 //             optional smooth term, off by default)
 //   free      start (0.4, 0, 0.2 pi),  goal (0.8, 0, 0),    no collision cost
 // Both tasks can make MPPI aware of the arm's reach (PushingEnv::Reach, the annulus
 // where the IK reaches the tool path): reach_limited rolls out ReachLimitedModel
-// (physics/reach_limited_model.h: a push the arm cannot reach leaves the block in
+// (physics/pushing/reach_limited_model.h: a push the arm cannot reach leaves the block in
 // place, so no plan counts on one), and reach_weight charges the cost for the first
 // reach_steps planned pushes that leave the annulus (1: the push executed now).
 // MPPI: Sigma = 0.5 I, lambda = 0.01, u in [-1, 1] x [-pi/2, pi/2] x [0, 1].
@@ -33,8 +36,9 @@
 // so it never predicts an overlap and the collision cost cannot see a push into it.
 //
 // Trial i draws its perturbation and its MPPI seed from TrajectoryRng(seed, i)
-// (pushing_collect.h), so any subset of trials and any thread count give the
-// same poses and actions; only the timings vary.
+// (models/random.h), so any subset of trials and any thread count give the
+// same poses and actions; only the timings vary. Each step's cost is the seed's
+// cost of the executed push (PushingCost without margin, substeps or extra terms).
 //
 //   diffdyn::PushTaskOptions options;          // obstacle task, K = 1000, T = 20
 //   auto summary = diffdyn::RunPushTrials(model, /*trials=*/20, options, /*seed=*/1);
@@ -42,7 +46,9 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -50,9 +56,13 @@
 
 #include <Eigen/Core>
 
-#include "diffdyn/autodiff_ode/progress.h"
 #include "diffdyn/models/transition_model.h"
-#include "diffdyn/physics/pushing_env.h"
+#include "diffdyn/physics/pushing/env.h"
+#include "diffdyn/physics/pushing/reach_limited_model.h"
+#include "diffdyn/physics/task.h"
+#include "diffdyn/solvers/control.h"
+#include "diffdyn/solvers/mppi.h"
+#include "diffdyn/solvers/pushing/cost.h"
 
 namespace diffdyn {
 
@@ -108,7 +118,6 @@ struct PushTrial {
   /// them); compared with poses[k + 1] it separates model error from controller error.
   std::vector<Eigen::Vector3d> predicted;
   std::vector<double> command_ms;        ///< wall time of each MPPI command (ms)
-  int fallbacks = 0;                     ///< commands where MPPI kept its best sample (step 6)
 };
 
 /// Totals of RunPushTrials.
@@ -117,6 +126,7 @@ struct PushTrialsSummary {
   double success_rate = 0, ci95_low = 0, ci95_high = 0;  ///< Wilson score interval
   double mean_pushes = 0;            ///< over all trials
   double ms_per_command = 0;         ///< median over all commands
+  int fallbacks = 0;                 ///< commands where MPPI kept its best sample (mppi.h, step 6)
   std::vector<PushTrial> runs;
 };
 
@@ -126,13 +136,54 @@ Eigen::Vector3d PushTaskStart(bool obstacle);
 /// The task's goal pose: obstacle (0.8, -0.1, 0), free (0.8, 0, 0).
 Eigen::Vector3d PushTaskGoal(bool obstacle);
 
-/// Wilson score interval for a binomial proportion s / n (z = 1.96: 95 %):
-///   (p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n),  p = s / n.
-/// Throws diffdyn::Error unless 0 <= successes <= trials and trials >= 1.
-std::pair<double, double> WilsonInterval(int successes, int trials, double z = 1.96);
-
 /// Throws diffdyn::Error naming the option when `options` is unusable.
 void ValidatePushTaskOptions(const PushTaskOptions& options);
+
+/// The pushing task of `options` as a Task: states and actions of size 3, one push
+/// per step (step_period 1), at most max_steps pushes, actions clipped to
+/// [-1, 1] x [-pi/2, pi/2] x [0, 1], the seeded starts and outcomes of the file comment.
+class PushingTask final : public Task {
+ public:
+  /// Throws diffdyn::Error naming the option when `options` is unusable.
+  explicit PushingTask(const PushTaskOptions& options);
+  int state_size() const override { return 3; }
+  int action_size() const override { return 3; }
+  double step_period() const override { return 1.0; }
+  int max_steps() const override { return options_.max_steps; }
+  Eigen::VectorXd Clip(const Eigen::Ref<const Eigen::VectorXd>& u) const override;
+  std::vector<TaskStart> Starts(int count, std::uint64_t seed) const override;
+  std::unique_ptr<TaskRun> Begin() const override;
+
+  const PushTaskOptions& options() const { return options_; }
+  /// The ODE world of the task (obstacle and goal set).
+  const PushingConfig& world() const { return world_; }
+  const Eigen::Vector3d& goal() const { return world_.goal; }
+
+ private:
+  PushTaskOptions options_;
+  PushingConfig world_;
+};
+
+/// MPPI over `model` with pushing's cost (file comment): the safety margin, swept
+/// test, clearance and reach terms of the task's options; with reach_limited the
+/// rollouts go through ReachLimitedModel. Keeps references to the task and the
+/// model. Throws diffdyn::Error unless the model has 3 states and 3 actions.
+class PushingMppiController final : public Controller {
+ public:
+  PushingMppiController(const PushingTask& task, const TransitionModel& model);
+  void Reset(const Eigen::VectorXd& x0, std::uint64_t seed) override;
+  Eigen::VectorXd Command(const Eigen::VectorXd& x) override;
+  /// Commands so far, over every run, where MPPI kept its best sample (mppi.h, step 6).
+  int fallbacks() const;
+
+ private:
+  const TransitionModel& model_;
+  std::optional<ReachLimitedModel> limited_;
+  PushingCost cost_;
+  MppiOptions mppi_options_;
+  std::unique_ptr<Mppi> mppi_;
+  int past_fallbacks_ = 0;
+};
 
 /// Runs trial `index` of a series seeded by `seed` (see the file comment).
 /// `model` must have state and action size 3.
@@ -140,11 +191,11 @@ PushTrial RunPushTrial(const TransitionModel& model, int index, const PushTaskOp
                        std::uint64_t seed);
 
 /// Runs `trials` seeded trials of MPPI over `model` in the ODE world, one after
-/// another; trial i uses seeds derived from (seed, i). `progress` (may be null)
-/// is updated after each trial with the successes so far. Throws diffdyn::Error
-/// for bad options or a model of the wrong sizes.
+/// another, through EvaluateController; trial i uses seeds derived from (seed, i).
+/// `progress` (may be empty) is called after each trial with the trials done and the
+/// successes so far. Throws diffdyn::Error for bad options or a model of the wrong sizes.
 PushTrialsSummary RunPushTrials(const TransitionModel& model, int trials,
                                 const PushTaskOptions& options, std::uint64_t seed,
-                                ProgressBar* progress = nullptr);
+                                const std::function<void(int done, int successes)>& progress = {});
 
 }  // namespace diffdyn

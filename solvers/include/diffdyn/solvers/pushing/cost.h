@@ -56,7 +56,7 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/physics/pushing_env.h"
+#include "diffdyn/physics/pushing/env.h"
 #include "diffdyn/solvers/mppi.h"
 
 namespace diffdyn {

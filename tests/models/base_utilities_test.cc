@@ -1,4 +1,4 @@
-// The base utilities every folder uses: checks, atomic files, deterministic
+// The base utilities of models/ every later folder uses: atomic files, deterministic
 // parallel loops and seeded randomness.
 #include <algorithm>
 #include <cmath>
@@ -14,10 +14,9 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/io.h"
-#include "diffdyn/autodiff_ode/parallel.h"
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/io.h"
+#include "diffdyn/models/parallel.h"
+#include "diffdyn/models/random.h"
 
 namespace diffdyn {
 namespace {
@@ -27,16 +26,6 @@ std::string ReadAll(const std::filesystem::path& path) {
   std::stringstream s;
   s << in.rdbuf();
   return s.str();
-}
-
-TEST(Check, ThrowsErrorWithAllMessageParts) {
-  try {
-    DIFFDYN_CHECK(1 + 1 == 3, "state has ", 4, " entries, the system expects ", 2.5);
-    FAIL() << "no exception";
-  } catch (const Error& e) {
-    EXPECT_STREQ(e.what(), "state has 4 entries, the system expects 2.5");
-  }
-  EXPECT_NO_THROW(DIFFDYN_CHECK(true, "never"));
 }
 
 TEST(WriteFileAtomically, WritesWholeFileAndLeavesNoTemporary) {

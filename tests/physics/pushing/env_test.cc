@@ -1,7 +1,7 @@
 // The ODE-engine pushing world: the quick version of the 10,000-push check,
 // determinism across thread counts, action validation, off_table, the oracle
 // and the IK it relies on.
-#include "diffdyn/physics/pushing_env.h"
+#include "diffdyn/physics/pushing/env.h"
 
 #include <cmath>
 #include <numbers>
@@ -9,9 +9,9 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/physics/panda_ik.h"
-#include "diffdyn/physics/pushing_collect.h"
-#include "diffdyn/physics/pushing_oracle.h"
+#include "diffdyn/physics/pushing/collect.h"
+#include "diffdyn/physics/pushing/oracle.h"
+#include "diffdyn/physics/pushing/panda_ik.h"
 
 namespace diffdyn {
 namespace {

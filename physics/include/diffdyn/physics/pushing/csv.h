@@ -36,7 +36,7 @@
 #include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/io.h"
+#include "diffdyn/models/io.h"
 #include "diffdyn/models/trajectory.h"
 
 namespace diffdyn {

@@ -28,9 +28,9 @@
 
 #include <Eigen/Core>
 
-#include "diffdyn/autodiff_ode/random.h"
-#include "diffdyn/physics/pushing_csv.h"
-#include "diffdyn/physics/pushing_env.h"
+#include "diffdyn/models/random.h"
+#include "diffdyn/physics/pushing/csv.h"
+#include "diffdyn/physics/pushing/env.h"
 
 namespace diffdyn {
 

@@ -22,7 +22,7 @@
 #include <Eigen/Core>
 
 #include "diffdyn/models/transition_model.h"
-#include "diffdyn/physics/pushing_env.h"
+#include "diffdyn/physics/pushing/env.h"
 
 namespace diffdyn {
 

@@ -1,5 +1,5 @@
 // The pushing cost's safety margin and swept test, and MPPI's transition-cost form.
-#include "diffdyn/solvers/pushing_cost.h"
+#include "diffdyn/solvers/pushing/cost.h"
 
 #include <cmath>
 #include <numbers>
@@ -7,10 +7,10 @@
 
 #include <gtest/gtest.h>
 
-#include "diffdyn/autodiff_ode/random.h"
+#include "diffdyn/models/random.h"
 #include "diffdyn/solvers/mppi.h"
-#include "diffdyn/solvers/pushing_trials.h"
-#include "toy_models.h"
+#include "diffdyn/solvers/pushing/trials.h"
+#include "../toy_models.h"
 
 namespace diffdyn {
 namespace {
