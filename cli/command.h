@@ -72,5 +72,6 @@ void RegisterPushCommand(CLI::App& app);
 void RegisterControlCommand(CLI::App& app);
 void RegisterHjbCommand(CLI::App& app);
 void RegisterSweepCommand(CLI::App& app);
+void RegisterFiguresCommand(CLI::App& app);
 
 }  // namespace diffdyn::cli

@@ -9,6 +9,7 @@ void RegisterCommands(CLI::App& app) {
   RegisterDemoCommand(app);
   RegisterDiagnoseCommand(app);
   RegisterEvalCommand(app);
+  RegisterFiguresCommand(app);
   RegisterHjbCommand(app);
   RegisterInfoCommand(app);
   RegisterPushCommand(app);

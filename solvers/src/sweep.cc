@@ -253,11 +253,12 @@ RunningTask StartSweepTask(const fs::path& executable, const SweepTask& task, co
   const int err = OpenOrThrow(task_dir / "stderr.txt", O_WRONLY | O_CREAT | O_TRUNC);
   // Everything the child needs is prepared before fork: after it, only
   // async-signal-safe calls.
-  std::vector<std::string> argv_strings = {"diffdyn"};
+  const fs::path& program = task.program.empty() ? executable : task.program;
+  std::vector<std::string> argv_strings = {program.filename().string()};
   argv_strings.insert(argv_strings.end(), task.args.begin(), task.args.end());
   std::vector<std::string> env_strings = TaskEnvironment();
   std::vector<char*> argv = Pointers(argv_strings), envp = Pointers(env_strings);
-  const std::string exe = executable.string();
+  const std::string exe = program.string();
   const pid_t parent = ::getpid();
 
   RunningTask running;
@@ -269,7 +270,7 @@ RunningTask StartSweepTask(const fs::path& executable, const SweepTask& task, co
     if (::getppid() != parent) ::_exit(128 + SIGTERM);  // the sweep already ended
     if (::dup2(in, 0) < 0 || ::dup2(out, 1) < 0 || ::dup2(err, 2) < 0) ::_exit(127);
     ::execve(exe.c_str(), argv.data(), envp.data());
-    static const char kMessage[] = "error: sweep: cannot execute the diffdyn executable\n";
+    static const char kMessage[] = "error: sweep: cannot execute the task's program\n";
     (void)!::write(2, kMessage, sizeof(kMessage) - 1);
     ::_exit(127);
   }

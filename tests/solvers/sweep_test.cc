@@ -169,6 +169,26 @@ TEST(SweepLocal, ATaskKilledByASignalIsRecordedAs128PlusTheSignal) {
   EXPECT_TRUE(queue.Results()[0].summary.is_null());
 }
 
+TEST(SweepLocal, ATaskWithItsOwnProgramRunsThatProgram) {
+  const fs::path dir = FreshFolder("sweep_program");
+  std::vector<SweepTask> tasks(2);
+  tasks[0].args = {"-c", "echo '{\"shell\": 1}'"};
+  tasks[1].index = 1;
+  tasks[1].program = "/bin/echo";
+  tasks[1].args = {"{\"echo\": 2}"};
+  SweepQueue queue(tasks, SweepFolder(dir));
+  RunSweepLocal("/bin/sh", queue, 2);
+  EXPECT_EQ(queue.Results()[0].summary.value("shell", -1), 1);
+  EXPECT_EQ(queue.Results()[1].summary.value("echo", -1), 2);
+
+  // A program that cannot be executed ends its task with 127, the others run.
+  std::vector<SweepTask> missing(1);
+  missing[0].program = dir / "no_such_program";
+  SweepQueue failed(missing, SweepFolder(FreshFolder("sweep_missing_program")));
+  RunSweepLocal("/bin/sh", failed, 1);
+  EXPECT_EQ(failed.Results()[0].exit_code, 127);
+}
+
 TEST(SweepLocal, TasksDoNotSeeTheMpiLaunchersVariables) {
   const fs::path dir = FreshFolder("sweep_env");
   ::setenv("OMPI_COMM_WORLD_RANK", "3", 1);

@@ -80,6 +80,8 @@ struct SweepTask {
   std::vector<std::string> grid_values;
   /// The arguments after the executable: command, options, grid options, "--json".
   std::vector<std::string> args;
+  /// The executable this task runs; empty: the scheduler's (the diffdyn binary).
+  std::filesystem::path program;
 };
 
 /// The tasks of `spec` in grid order. If `out_name` is not empty and the spec
@@ -122,7 +124,8 @@ struct RunningTask {
   std::chrono::steady_clock::time_point start;
 };
 
-/// Starts `task` as a child process of `executable` with stdin from /dev/null,
+/// Starts `task` as a child process of `task.program` (of `executable` when
+/// that is empty) with stdin from /dev/null,
 /// stdout and stderr to `task_dir`/stdout.txt and stderr.txt (the folder is
 /// created), and the launcher's OMPI_* and PMIX_* variables removed from its
 /// environment. The child is sent SIGTERM if this process dies. Throws

@@ -1,0 +1,209 @@
+// diffdyn figures: every figure of both papers, each by its paper_figures program,
+// run as the tasks of one sweep (solvers/sweep.h), and one page DIR/index.html with
+// every PNG, its CSVs and our numbers beside the papers' (figures_page.h).
+//
+//   diffdyn figures --quick --out figs            # every figure at small sizes (minutes)
+//   diffdyn figures --only hjb_pendulum --out figs
+//
+// Figure NAME writes into DIR/NAME/; its program's stdout and stderr go to
+// DIR/tasks/<i>/. The figures to run, their arguments and the numbers the page
+// shows come from paper_figures/figures.json. With --resume, a figure whose
+// run is recorded in DIR with the same arguments is not run again.
+#include <algorithm>
+#include <chrono>
+#include <ctime>
+#include <filesystem>
+#include <memory>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+#include <fmt/core.h>
+
+#include "command.h"
+#include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/models/io.h"
+#include "diffdyn/solvers/sweep.h"
+#include "figures_page.h"
+
+namespace diffdyn::cli {
+namespace {
+namespace fs = std::filesystem;
+
+struct FiguresOptions {
+  std::string out;
+  std::string only;
+  std::string manifest = DIFFDYN_FIGURE_MANIFEST;
+  std::string programs = DIFFDYN_FIGURE_PROGRAMS;
+  std::string data = DIFFDYN_SHARED_DATA;
+  int workers = 1;
+  bool quick = false;
+  bool resume = false;
+  bool json = false;
+  bool quiet = false;
+};
+
+// The figures `only` names (comma-separated; empty: all), in the manifest's order.
+std::vector<const FigureEntry*> Select(const std::vector<FigureEntry>& all, const std::string& only) {
+  std::set<std::string> wanted;
+  for (std::size_t start = 0; !only.empty() && start <= only.size();) {
+    const std::size_t comma = std::min(only.find(',', start), only.size());
+    wanted.insert(only.substr(start, comma - start));
+    start = comma + 1;
+  }
+  std::string known;
+  for (const FigureEntry& e : all) known += (known.empty() ? "" : ", ") + e.name;
+  for (const std::string& name : wanted) {
+    DIFFDYN_CHECK(std::any_of(all.begin(), all.end(), [&](const FigureEntry& e) { return e.name == name; }),
+                  "--only: unknown figure '", name.substr(0, 60), "' (", known, ")");
+  }
+  std::vector<const FigureEntry*> out;
+  for (const FigureEntry& e : all) {
+    if (wanted.empty() || wanted.count(e.name)) out.push_back(&e);
+  }
+  return out;
+}
+
+// `arg` with "{data}" replaced by the data folder.
+std::string Substitute(std::string arg, const std::string& data) {
+  for (std::size_t at = arg.find("{data}"); at != std::string::npos; at = arg.find("{data}", at + data.size())) {
+    arg.replace(at, 6, data);
+  }
+  return arg;
+}
+
+std::string ShellQuote(const std::string& s) {
+  if (!s.empty() && s.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-+=.,/:@") ==
+                        std::string::npos) {
+    return s;
+  }
+  std::string out = "'";
+  for (const char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+// One sweep task per figure: its program, arguments, "--out DIR/NAME --plot".
+std::vector<SweepTask> MakeTasks(const std::vector<const FigureEntry*>& figures, const FiguresOptions& o) {
+  std::vector<SweepTask> tasks;
+  for (const FigureEntry* e : figures) {
+    SweepTask task;
+    task.index = static_cast<int>(tasks.size());
+    task.grid_values = {e->name};
+    task.program = fs::path(o.programs) / e->program;
+    DIFFDYN_CHECK(::access(task.program.c_str(), X_OK) == 0, "--programs: ", task.program.string(),
+                  " is not an executable (build the figure_* targets, or point --programs at them)");
+    for (const std::string& arg : o.quick ? e->quick_args : e->full_args) task.args.push_back(Substitute(arg, o.data));
+    task.args.insert(task.args.end(), {"--out", (fs::path(o.out) / e->name).string(), "--plot"});
+    tasks.push_back(std::move(task));
+  }
+  return tasks;
+}
+
+std::string CommandText(const SweepTask& task) {
+  std::string text = ShellQuote(task.program.string());
+  for (const std::string& arg : task.args) text += " " + ShellQuote(arg);
+  return text;
+}
+
+std::string UtcNow() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  ::gmtime_r(&now, &tm);
+  char buffer[32];
+  std::strftime(buffer, sizeof buffer, "%Y-%m-%d %H:%M UTC", &tm);
+  return buffer;
+}
+
+// The command line that redoes this run (options at their defaults left out).
+std::string Invocation(const FiguresOptions& o) {
+  const FiguresOptions defaults;
+  std::string text = "diffdyn figures";
+  if (o.quick) text += " --quick";
+  if (!o.only.empty()) text += " --only " + ShellQuote(o.only);
+  if (o.workers != defaults.workers) text += fmt::format(" --workers {}", o.workers);
+  if (o.resume) text += " --resume";
+  if (o.manifest != defaults.manifest) text += " --manifest " + ShellQuote(o.manifest);
+  if (o.programs != defaults.programs) text += " --programs " + ShellQuote(o.programs);
+  if (o.data != defaults.data) text += " --data " + ShellQuote(o.data);
+  return text + " --out " + ShellQuote(o.out);
+}
+
+void RunFigures(const FiguresOptions& o, const std::string& invocation) {
+  const auto start = std::chrono::steady_clock::now();
+  const std::vector<FigureEntry> manifest = ReadFigureManifest(o.manifest);
+  const std::vector<const FigureEntry*> figures = Select(manifest, o.only);
+  const fs::path out(o.out), page = fs::path(o.out) / "index.html";
+  CheckOutputPath(page);
+  const std::vector<SweepTask> tasks = MakeTasks(figures, o);
+  std::error_code ec;
+  fs::create_directories(out / "tasks", ec);
+  if (ec) throw std::runtime_error(StrCat(o.out, ": cannot create the folder: ", ec.message()));
+  const SweepFolder folder(out);
+  if (!o.resume) {
+    for (const SweepTask& t : tasks) fs::remove(folder.TaskDir(t.index) / "result.json", ec);
+  }
+
+  if (!o.quiet) {
+    for (const FigureEntry* e : figures) {
+      fmt::print(stderr, "figures: {} ({}){}\n", e->name, e->paper, o.quick ? "" : "; full run: " + e->full_time);
+    }
+  }
+  SweepQueue queue(tasks, folder, [&](const SweepTask& t, const SweepResult& r, std::size_t finished) {
+    if (!o.quiet) {
+      fmt::print(stderr, "figures: [{}/{}] {}: exit {}, {:.1f} s\n", finished, tasks.size(), t.grid_values[0],
+                 r.exit_code, r.seconds);
+    }
+  });
+  RunSweepLocal(fs::read_symlink("/proc/self/exe"), queue, o.workers);
+
+  std::vector<FigureRun> runs;
+  std::vector<std::string> failed;
+  for (std::size_t i = 0; i < figures.size(); ++i) {
+    const SweepResult& r = queue.Results()[i];
+    runs.push_back({figures[i], CommandText(tasks[i]), r.exit_code, r.seconds, fmt::format("tasks/{}", i)});
+    if (r.exit_code != 0) failed.push_back(figures[i]->name);
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  WriteFiguresPage(page, runs, {o.quick, DescribeMachine(), UtcNow(), invocation, seconds});
+  if (!failed.empty()) {
+    std::string names;
+    for (const std::string& n : failed) names += (names.empty() ? "" : ", ") + n;
+    throw std::runtime_error(StrCat("figures: ", failed.size(), " of ", figures.size(), " figures failed (", names,
+                                    "); their logs are linked from ", page.string()));
+  }
+  if (o.json) {
+    PrintJson({{"figures", figures.size()}, {"done", figures.size()}, {"failed", 0}, {"seconds", seconds},
+               {"index_path", page.string()}});
+  } else {
+    fmt::print("{} figures in {:.1f} s; page: {}\n", figures.size(), seconds, page.string());
+  }
+}
+
+}  // namespace
+
+void RegisterFiguresCommand(CLI::App& app) {
+  auto* command = app.add_subcommand(
+      "figures", "Regenerate every figure of both papers and one page DIR/index.html with ours beside the papers'");
+  auto o = std::make_shared<FiguresOptions>();
+  command->add_option("--out", o->out, "Output folder: one folder per figure, tasks/ with logs, index.html")
+      ->required()
+      ->check(OutputPath(/*folder=*/true));
+  command->add_option("--only", o->only, "Comma-separated figure names (default: all; see paper_figures/figures.json)");
+  command->add_flag("--quick", o->quick, "Small sizes (minutes): every figure is produced, numbers not comparable");
+  command->add_option("--workers", o->workers, "Figures run at once (each uses both cores itself)")
+      ->check(Bounded(1, 64))
+      ->capture_default_str();
+  command->add_flag("--resume", o->resume, "Keep the figures already recorded in --out with the same arguments");
+  command->add_option("--manifest", o->manifest, "The figures and their numbers")->check(InputPath())->capture_default_str();
+  command->add_option("--programs", o->programs, "Folder of the figure_* programs")->capture_default_str();
+  command->add_option("--data", o->data, "The shared data folder ({data} in the manifest)")->capture_default_str();
+  command->add_flag("--json", o->json, "Print a one-line JSON summary on stdout");
+  command->add_flag("--quiet", o->quiet, "No progress lines");
+  command->callback([o] {
+    RunFigures(*o, Invocation(*o));
+  });
+}
+
+}  // namespace diffdyn::cli

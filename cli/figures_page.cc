@@ -1,0 +1,392 @@
+#include "figures_page.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include <fmt/core.h>
+#include <nlohmann/json.hpp>
+
+#include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/models/io.h"
+#include "diffdyn/models/json_io.h"
+
+namespace diffdyn::cli {
+namespace {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+// ---------------------------------------------------------------------------
+// The manifest.
+
+std::string Text(const json& object, const char* key, const std::string& where, bool required = true) {
+  if (!object.contains(key)) {
+    DIFFDYN_CHECK(!required, where, ": missing '", key, "'");
+    return "";
+  }
+  DIFFDYN_CHECK(object[key].is_string(), where, ": '", key, "' must be a string");
+  return object[key].get<std::string>();
+}
+
+std::vector<std::string> Texts(const json& object, const char* key, const std::string& where) {
+  DIFFDYN_CHECK(object.contains(key) && object[key].is_array(), where, ": '", key, "' must be an array of strings");
+  std::vector<std::string> out;
+  for (const json& v : object[key]) {
+    DIFFDYN_CHECK(v.is_string(), where, ": '", key, "' must be an array of strings");
+    out.push_back(v.get<std::string>());
+  }
+  return out;
+}
+
+std::optional<double> Number(const json& object, const char* key, const std::string& where) {
+  if (!object.contains(key)) return std::nullopt;
+  DIFFDYN_CHECK(object[key].is_number() && std::isfinite(object[key].get<double>()), where, ": '", key,
+                "' must be a finite number");
+  return object[key].get<double>();
+}
+
+// A file name inside the figure's folder: relative, no "..".
+void CheckInside(const std::string& file, const std::string& where) {
+  const fs::path p(file);
+  bool up = false;
+  for (const fs::path& part : p) up = up || part == "..";
+  DIFFDYN_CHECK(!file.empty() && p.is_relative() && !up, where, ": '", file,
+                "' must be a relative path inside the figure's folder");
+}
+
+FigureNumber ReadNumber(const json& j, const std::string& where) {
+  DIFFDYN_CHECK(j.is_object(), where, ": must be an object");
+  FigureNumber n;
+  n.label = Text(j, "label", where);
+  n.csv = Text(j, "csv", where);
+  CheckInside(n.csv, where);
+  n.column = Text(j, "column", where);
+  n.reduce = Text(j, "reduce", where);
+  static const std::set<std::string> kReduce = {"value", "median", "mean", "min", "max", "count"};
+  DIFFDYN_CHECK(kReduce.count(n.reduce) != 0, where, ": unknown reduce '", n.reduce,
+                "' (value, median, mean, min, max, count)");
+  if (j.contains("where")) {
+    DIFFDYN_CHECK(j["where"].is_object(), where, ": 'where' must be an object of strings");
+    for (const auto& [column, value] : j["where"].items()) {
+      DIFFDYN_CHECK(value.is_string(), where, ": 'where' must be an object of strings");
+      n.where.emplace_back(column, value.get<std::string>());
+    }
+  }
+  n.reference = Number(j, "reference", where);
+  n.reference_source = Text(j, "reference_source", where, /*required=*/false);
+  if (j.contains("accept")) {
+    const json& a = j["accept"];
+    DIFFDYN_CHECK(a.is_object(), where, ": 'accept' must be an object");
+    n.min = Number(a, "min", where);
+    n.max = Number(a, "max", where);
+    n.min_ratio = Number(a, "min_ratio", where);
+    n.max_ratio = Number(a, "max_ratio", where);
+    DIFFDYN_CHECK(n.reference || !(n.min_ratio || n.max_ratio), where, ": a ratio bound needs a 'reference'");
+  }
+  return n;
+}
+
+FigureEntry ReadEntry(const json& j, const std::string& where) {
+  DIFFDYN_CHECK(j.is_object(), where, ": must be an object");
+  FigureEntry e;
+  e.name = Text(j, "name", where);
+  DIFFDYN_CHECK(!e.name.empty() && e.name.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_") ==
+                                       std::string::npos,
+                where, ": 'name' must be lower-case letters, digits and '_'");
+  const std::string here = StrCat(where, " (", e.name, ")");
+  e.paper = Text(j, "paper", here);
+  e.title = Text(j, "title", here);
+  e.caption = Text(j, "caption", here);
+  e.program = Text(j, "program", here);
+  CheckInside(e.program, here);
+  e.full_time = Text(j, "full_time", here);
+  e.readme = Text(j, "readme", here, /*required=*/false);
+  e.full_args = Texts(j, "full_args", here);
+  e.quick_args = Texts(j, "quick_args", here);
+  e.images = Texts(j, "images", here);
+  e.files = Texts(j, "files", here);
+  for (const std::string& f : e.images) CheckInside(f, here);
+  for (const std::string& f : e.files) CheckInside(f, here);
+  DIFFDYN_CHECK(j.contains("numbers") && j["numbers"].is_array(), here, ": 'numbers' must be an array");
+  for (std::size_t i = 0; i < j["numbers"].size(); ++i) {
+    e.numbers.push_back(ReadNumber(j["numbers"][i], StrCat(here, ": numbers[", i, "]")));
+  }
+  return e;
+}
+
+// ---------------------------------------------------------------------------
+// CSV cells.
+
+// One CSV line split into cells (double quotes group a cell; "" is a quote).
+std::vector<std::string> SplitCsvLine(const std::string& line) {
+  std::vector<std::string> cells(1);
+  bool quoted = false;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (quoted && c == '"' && i + 1 < line.size() && line[i + 1] == '"') {
+      cells.back() += '"';
+      ++i;
+    } else if (c == '"') {
+      quoted = !quoted;
+    } else if (c == ',' && !quoted) {
+      cells.emplace_back();
+    } else if (c != '\r') {
+      cells.back() += c;
+    }
+  }
+  return cells;
+}
+
+// The `column` cells of the rows matching `where`; sets `problem` on failure.
+std::vector<std::string> MatchingCells(const FigureNumber& n, const fs::path& path, std::string& problem) {
+  std::ifstream in(path);
+  std::string line;
+  if (!in.good() || !std::getline(in, line)) {
+    problem = "no CSV";
+    return {};
+  }
+  const std::vector<std::string> header = SplitCsvLine(line);
+  const auto index_of = [&](const std::string& name) -> std::ptrdiff_t {
+    const auto it = std::find(header.begin(), header.end(), name);
+    return it == header.end() ? -1 : it - header.begin();
+  };
+  const std::ptrdiff_t column = index_of(n.column);
+  std::vector<std::pair<std::ptrdiff_t, std::string>> filters;
+  for (const auto& [name, value] : n.where) filters.emplace_back(index_of(name), value);
+  if (column < 0 || std::any_of(filters.begin(), filters.end(), [](const auto& f) { return f.first < 0; })) {
+    problem = "a column is not in the CSV";
+    return {};
+  }
+  std::vector<std::string> cells;
+  while (std::getline(in, line)) {
+    if (line.empty() || line == "\r") continue;
+    const std::vector<std::string> row = SplitCsvLine(line);
+    const auto cell = [&](std::ptrdiff_t i) { return static_cast<std::size_t>(i) < row.size() ? row[i] : ""; };
+    bool match = true;
+    for (const auto& [i, value] : filters) match = match && cell(i) == value;
+    if (match) cells.push_back(cell(column));
+  }
+  return cells;
+}
+
+double Reduce(const std::string& how, std::vector<double> v) {
+  if (how == "count") return static_cast<double>(v.size());
+  std::sort(v.begin(), v.end());
+  if (how == "min" || how == "value") return v.front();
+  if (how == "max") return v.back();
+  double sum = 0;
+  for (double x : v) sum += x;
+  if (how == "mean") return sum / static_cast<double>(v.size());
+  const std::size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);  // median
+}
+
+// ---------------------------------------------------------------------------
+// HTML.
+
+std::string Escape(const std::string& s) {
+  std::string out;
+  for (const char c : s) {
+    switch (c) {
+      case '&': out += "&amp;"; break;
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '"': out += "&quot;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+std::string Format(double v) { return fmt::format("{:.4g}", v); }
+
+std::string AcceptText(const FigureNumber& n) {
+  std::vector<std::string> parts;
+  if (n.min) parts.push_back("≥ " + Format(*n.min));
+  if (n.max) parts.push_back("≤ " + Format(*n.max));
+  if (n.min_ratio) parts.push_back("ratio ≥ " + Format(*n.min_ratio));
+  if (n.max_ratio) parts.push_back("ratio ≤ " + Format(*n.max_ratio));
+  std::string out;
+  for (std::size_t i = 0; i < parts.size(); ++i) out += (i ? ", " : "") + parts[i];
+  return out.empty() ? "none set" : out;
+}
+
+std::string WhereText(const FigureNumber& n) {
+  std::string out;
+  for (std::size_t i = 0; i < n.where.size(); ++i) {
+    out += (i ? ";" : "") + n.where[i].first + "=" + n.where[i].second;
+  }
+  return out;
+}
+
+void WriteNumberRow(std::ostream& html, const FigureEntry& e, const FigureNumber& n, const fs::path& root) {
+  const NumberValue v = EvaluateFigureNumber(n, root / e.name);
+  const std::string csv = e.name + "/" + n.csv;
+  html << "<tr><td>" << Escape(n.label) << "</td>";
+  html << "<td class=\"ours\" data-csv=\"" << Escape(csv) << "\" data-where=\"" << Escape(WhereText(n))
+       << "\" data-column=\"" << Escape(n.column) << "\" data-reduce=\"" << n.reduce << "\">"
+       << (v.value ? Format(*v.value) : "missing: " + Escape(v.problem)) << "</td>";
+  html << "<td>" << (n.reference ? Format(*n.reference) : "-") << "</td><td>" << Escape(n.reference_source)
+       << "</td>";
+  const bool ratio = v.value && n.reference && *n.reference != 0;
+  html << "<td>" << (ratio ? fmt::format("{:.3g}", *v.value / *n.reference) : "-") << "</td>";
+  const std::string verdict = Verdict(n, v);
+  html << "<td>" << AcceptText(n) << "</td><td class=\"" << (verdict == "meets" ? "ok" : verdict == "misses" ? "bad" : "")
+       << "\">" << verdict << "</td>";
+  html << "<td>" << (fs::is_regular_file(root / csv) ? "<a href=\"" + Escape(csv) + "\">" + Escape(n.csv) + "</a>"
+                                                     : Escape(n.csv))
+       << " " << n.reduce << " of " << Escape(n.column) << (n.where.empty() ? "" : " where " + Escape(WhereText(n)))
+       << "</td></tr>\n";
+}
+
+void WriteFigure(std::ostream& html, const FigureRun& run, const fs::path& root) {
+  const FigureEntry& e = *run.entry;
+  html << "<section id=\"" << e.name << "\">\n<h2>" << Escape(e.paper) << ": " << Escape(e.title) << "</h2>\n";
+  html << "<p>" << Escape(e.caption) << "</p>\n";
+  html << "<p class=\"run\">Command: <code>" << Escape(run.command) << "</code><br>Wall time "
+       << fmt::format("{:.1f}", run.seconds) << " s, exit code " << run.exit_code << ". Logs: <a href=\""
+       << Escape(run.log_dir) << "/stdout.txt\">stdout</a>, <a href=\"" << Escape(run.log_dir)
+       << "/stderr.txt\">stderr</a>. Full run: " << Escape(e.full_time) << "."
+       << (e.readme.empty() ? "" : " Details: paper_figures/" + Escape(e.readme) + ".") << "</p>\n<div class=\"pngs\">\n";
+  for (const std::string& image : e.images) {
+    const std::string rel = e.name + "/" + image;
+    if (fs::is_regular_file(root / rel)) {
+      html << "<figure><a href=\"" << Escape(rel) << "\"><img src=\"" << Escape(rel) << "\" alt=\"" << Escape(image)
+           << "\"></a><figcaption>" << Escape(image) << "</figcaption></figure>\n";
+    } else {
+      html << "<p class=\"bad\">" << Escape(image) << " was not produced.</p>\n";
+    }
+  }
+  html << "</div>\n<p>CSV: ";
+  for (const std::string& file : e.files) {
+    const std::string rel = e.name + "/" + file;
+    html << (fs::is_regular_file(root / rel) ? "<a href=\"" + Escape(rel) + "\">" + Escape(file) + "</a> "
+                                             : Escape(file) + " (not produced) ");
+  }
+  html << "</p>\n<table>\n<tr><th>quantity</th><th>ours</th><th>reference</th><th>source</th>"
+          "<th>ours / reference</th><th>acceptance</th><th>verdict</th><th>from</th></tr>\n";
+  for (const FigureNumber& n : e.numbers) WriteNumberRow(html, e, n, root);
+  html << "</table>\n</section>\n";
+}
+
+constexpr const char* kStyle =
+    "body{font-family:sans-serif;max-width:1200px;margin:auto;padding:1em}"
+    "table{border-collapse:collapse;font-size:90%}td,th{border:1px solid #ccc;padding:3px 6px;text-align:left}"
+    "figure{display:inline-block;margin:4px}img{max-width:560px}.ok{color:#070}.bad{color:#b00}"
+    "code{background:#f4f4f4}";
+
+}  // namespace
+
+std::vector<FigureEntry> ReadFigureManifest(const fs::path& path) {
+  const json j = ReadJsonFile(path);
+  const std::string where = path.string();
+  DIFFDYN_CHECK(j.is_object() && j.contains("figures") && j["figures"].is_array(), where,
+                ": must be an object with an array 'figures'");
+  std::vector<FigureEntry> out;
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < j["figures"].size(); ++i) {
+    out.push_back(ReadEntry(j["figures"][i], StrCat(where, ": figures[", i, "]")));
+    DIFFDYN_CHECK(names.insert(out.back().name).second, where, ": figure '", out.back().name, "' given twice");
+  }
+  return out;
+}
+
+NumberValue EvaluateFigureNumber(const FigureNumber& number, const fs::path& figure_dir) {
+  NumberValue out;
+  const std::vector<std::string> cells = MatchingCells(number, figure_dir / number.csv, out.problem);
+  if (!out.problem.empty()) return out;
+  out.rows = cells.size();
+  if (cells.empty() || (number.reduce == "value" && cells.size() != 1)) {
+    out.problem = fmt::format("{} matching rows", cells.size());
+    return out;
+  }
+  std::vector<double> values;
+  for (const std::string& cell : cells) {
+    char* end = nullptr;
+    const double v = std::strtod(cell.c_str(), &end);
+    if (cell.empty() || *end != '\0' || !std::isfinite(v)) {
+      out.problem = "a cell is not a finite number";
+      return out;
+    }
+    values.push_back(v);
+  }
+  out.value = Reduce(number.reduce, std::move(values));
+  return out;
+}
+
+std::string Verdict(const FigureNumber& n, const NumberValue& v) {
+  if (!v.value) return "missing";
+  if (!n.min && !n.max && !n.min_ratio && !n.max_ratio) return "not judged";
+  const double x = *v.value;
+  bool ok = (!n.min || x >= *n.min) && (!n.max || x <= *n.max);
+  if (n.reference && *n.reference != 0) {
+    const double r = x / *n.reference;
+    ok = ok && (!n.min_ratio || r >= *n.min_ratio) && (!n.max_ratio || r <= *n.max_ratio);
+  }
+  return ok ? "meets" : "misses";
+}
+
+std::string DescribeMachine() {
+  std::ifstream in("/proc/cpuinfo");
+  std::string line, model = "unknown CPU", isa = "baseline ISA";
+  while (std::getline(in, line)) {
+    const std::size_t colon = line.find(':');
+    if (colon == std::string::npos) continue;
+    const std::string key = line.substr(0, line.find_last_not_of(" \t", colon - 1) + 1);
+    const std::string value = colon + 2 <= line.size() ? line.substr(colon + 2) : "";
+    if (key == "model name" && model == "unknown CPU") model = value;
+    if (key == "flags" && isa == "baseline ISA") {
+      const std::string flags = " " + value + " ";
+      isa = flags.find(" avx512f ") != std::string::npos ? "AVX-512"
+            : flags.find(" avx2 ") != std::string::npos ? "AVX2"
+                                                         : "baseline ISA";
+    }
+  }
+  return fmt::format("{} ({} cores, {})", model, std::max(1u, std::thread::hardware_concurrency()), isa);
+}
+
+void WriteFiguresPage(const fs::path& path, const std::vector<FigureRun>& runs, const PageInfo& info) {
+  const fs::path root = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  std::vector<std::string> misses;
+  std::size_t judged = 0, failed = 0;
+  for (const FigureRun& run : runs) {
+    failed += run.exit_code != 0;
+    for (const FigureNumber& n : run.entry->numbers) {
+      const std::string v = Verdict(n, EvaluateFigureNumber(n, root / run.entry->name));
+      judged += v == "meets" || v == "misses";
+      if (v == "misses") misses.push_back(run.entry->paper + ": " + n.label);
+    }
+  }
+  WriteFileAtomically(path, [&](std::ostream& html) {
+    html << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            "<title>diffdyn: the figures of both papers</title><style>"
+         << kStyle << "</style></head><body>\n<h1>The figures of both papers, regenerated by diffdyn</h1>\n";
+    html << "<p>" << (info.quick ? "<b>Quick run</b> (small sizes: it shows that every figure is produced; its numbers "
+                                   "are not comparable with the papers')."
+                                 : "Full run.")
+         << "<br>Command: <code>" << Escape(info.invocation) << "</code><br>Machine: " << Escape(info.machine)
+         << ". Date: " << Escape(info.date) << ". Wall time " << fmt::format("{:.1f}", info.seconds) << " s.</p>\n";
+    html << "<p>" << runs.size() << " figures, " << failed << " failed. " << judged
+         << " numbers have an acceptance bound; " << misses.size() << " miss it"
+         << (misses.empty() ? "." : ":") << "</p>\n";
+    if (!misses.empty()) {
+      html << "<ul class=\"bad\">\n";
+      for (const std::string& m : misses) html << "<li>" << Escape(m) << "</li>\n";
+      html << "</ul>\n";
+    }
+    html << "<ul>\n";
+    for (const FigureRun& run : runs) {
+      html << "<li><a href=\"#" << run.entry->name << "\">" << Escape(run.entry->paper) << ": "
+           << Escape(run.entry->title) << "</a></li>\n";
+    }
+    html << "</ul>\n";
+    for (const FigureRun& run : runs) WriteFigure(html, run, root);
+    html << "</body></html>\n";
+  });
+}
+
+}  // namespace diffdyn::cli

@@ -1,0 +1,154 @@
+// diffdyn figures on a manifest of stand-in figure programs (shell scripts that
+// write a CSV and a PNG), so the command is tested apart from the papers' figures:
+// the page's numbers, ratios and verdicts, the independent page checker
+// (scripts/check_figures_page.py) passing on it and failing on a changed number or
+// a missing image, a failing figure (exit 1, page still written), and bad input
+// (one line, exit 2, nothing written). The real figures' quick run is the ctest
+// paper_figures.figures_quick.
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "run_diffdyn.h"
+
+namespace diffdyn {
+namespace {
+namespace fs = std::filesystem;
+
+using testing::CountLines;
+using testing::ReadAll;
+using testing::RunDiffdyn;
+using testing::TempPath;
+
+// A folder with programs `fig_ok` (writes out/values.csv with three rows and
+// out/plot.png) and `fig_fail` (exit 3), and a manifest naming both.
+struct StandIns {
+  std::string programs, manifest;
+};
+
+void WriteProgram(const fs::path& path, const std::string& body) {
+  std::ofstream(path) << "#!/bin/sh\n" << body;
+  fs::permissions(path, fs::perms::owner_all);
+}
+
+StandIns MakeStandIns(const std::string& name, bool with_failing) {
+  const fs::path dir = TempPath(name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  // Arguments: [--quick] --out DIR --plot.
+  WriteProgram(dir / "fig_ok",
+               "while [ $# -gt 0 ]; do [ \"$1\" = --out ] && out=$2; shift; done\n"
+               "mkdir -p \"$out\"\n"
+               "printf 'kind,seed,loss\\na,1,1.0\\na,2,10.0\\na,3,2.0\\nb,1,0.125\\n' > \"$out/values.csv\"\n"
+               "printf 'png' > \"$out/plot.png\"\n"
+               "echo run >> \"$out/runs.txt\"\n");
+  WriteProgram(dir / "fig_fail", "echo broken >&2\nexit 3\n");
+  const std::string failing = R"(, {"name": "broken", "paper": "Fig. 9", "title": "t", "caption": "c",
+      "program": "fig_fail", "full_args": [], "quick_args": [], "full_time": "none",
+      "images": [], "files": [], "numbers": []})";
+  std::ofstream(dir / "figures.json") << R"({"figures": [{"name": "ok", "paper": "Fig. 1", "title": "Stand-in",
+      "caption": "A <stand-in> figure", "program": "fig_ok", "full_args": [], "quick_args": ["--quick"],
+      "full_time": "seconds", "images": ["plot.png"], "files": ["values.csv"], "numbers": [
+        {"label": "median loss of a", "csv": "values.csv", "where": {"kind": "a"}, "column": "loss",
+         "reduce": "median", "reference": 4, "reference_source": "paper", "accept": {"max_ratio": 1}},
+        {"label": "loss of b", "csv": "values.csv", "where": {"kind": "b"}, "column": "loss",
+         "reduce": "value", "reference": 0.1, "accept": {"max": 0.1}},
+        {"label": "loss of c", "csv": "values.csv", "where": {"kind": "c"}, "column": "loss", "reduce": "value"}]})"
+                                  << (with_failing ? failing : "") << "]}\n";
+  return {dir.string(), (dir / "figures.json").string()};
+}
+
+std::string Options(const StandIns& s, const std::string& out) {
+  return "figures --quiet --manifest '" + s.manifest + "' --programs '" + s.programs + "' --out '" + out + "'";
+}
+
+int CheckPage(const std::string& page) {
+  const std::string cmd = std::string(DIFFDYN_PYTHON) + " '" + DIFFDYN_SOURCE_DIR +
+                          "/scripts/check_figures_page.py' '" + page + "' > /dev/null";
+  return WEXITSTATUS(std::system(cmd.c_str()));
+}
+
+TEST(Figures, PageShowsEachNumberBesideItsReferenceAndTheCheckerAgrees) {
+  const StandIns s = MakeStandIns("figures_ok", false);
+  const std::string out = TempPath("figures_ok_out");
+  fs::remove_all(out);
+  const auto r = RunDiffdyn(Options(s, out) + " --quick --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string page = ReadAll(out + "/index.html");
+  // The median of 1, 10, 2 is 2: half the reference 4, within ratio <= 1.
+  EXPECT_NE(page.find("data-reduce=\"median\">2</td><td>4</td><td>paper</td><td>0.5</td>"), std::string::npos);
+  EXPECT_NE(page.find(">meets<"), std::string::npos);
+  // 0.125 > 0.1: misses, and the summary names it.
+  EXPECT_NE(page.find(">0.125</td>"), std::string::npos);
+  EXPECT_NE(page.find("<li>Fig. 1: loss of b</li>"), std::string::npos);
+  EXPECT_NE(page.find("missing: 0 matching rows"), std::string::npos);
+  EXPECT_NE(page.find("A &lt;stand-in&gt; figure"), std::string::npos);
+  EXPECT_NE(page.find("fig_ok --quick --out"), std::string::npos);
+  EXPECT_NE(page.find("<img src=\"ok/plot.png\""), std::string::npos);
+  EXPECT_EQ(CheckPage(out + "/index.html"), 0);
+
+  // The checker recomputes from the CSV: a changed number or a missing image fails it.
+  std::string changed = page;
+  changed.replace(changed.find(">0.125<"), 7, ">0.126<");
+  std::ofstream(out + "/changed.html") << changed;
+  EXPECT_EQ(CheckPage(out + "/changed.html"), 1);
+  fs::remove(out + "/ok/plot.png");
+  EXPECT_EQ(CheckPage(out + "/index.html"), 1);
+}
+
+TEST(Figures, AFailingFigureIsARuntimeFailureWithThePageWritten) {
+  const StandIns s = MakeStandIns("figures_fail", true);
+  const std::string out = TempPath("figures_fail_out");
+  fs::remove_all(out);
+  const auto r = RunDiffdyn(Options(s, out));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_EQ(CountLines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("1 of 2 figures failed (broken)"), std::string::npos) << r.err;
+  const std::string page = ReadAll(out + "/index.html");
+  EXPECT_NE(page.find("2 figures, 1 failed"), std::string::npos);
+  EXPECT_EQ(ReadAll(out + "/tasks/1/stderr.txt"), "broken\n");
+
+  // Only the failing one again, with --resume: the finished figure is not rerun.
+  const auto again = RunDiffdyn(Options(s, out) + " --only ok --resume");
+  EXPECT_EQ(again.exit_code, 0) << again.err;
+  EXPECT_EQ(ReadAll(out + "/ok/runs.txt"), "run\n");
+  // Without --resume it runs again.
+  EXPECT_EQ(RunDiffdyn(Options(s, out) + " --only ok").exit_code, 0);
+  EXPECT_EQ(ReadAll(out + "/ok/runs.txt"), "run\nrun\n");
+}
+
+TEST(Figures, BadInputIsOneLineExitTwoAndNothingWritten) {
+  const StandIns s = MakeStandIns("figures_bad", false);
+  const std::string out = TempPath("figures_bad_out");
+  fs::remove_all(out);
+  const auto expect_refused = [&](const std::string& args, const std::string& needle) {
+    const auto r = RunDiffdyn(args);
+    EXPECT_EQ(r.exit_code, 2) << args;
+    EXPECT_EQ(CountLines(r.err), 1) << r.err;
+    EXPECT_NE(r.err.find(needle), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(out)) << args;
+  };
+  expect_refused(Options(s, out) + " --only ok,nope", "--only: unknown figure 'nope' (ok)");
+  expect_refused("figures --manifest '" + s.manifest + "' --programs /nonexistent --out '" + out + "'",
+                 "--programs: /nonexistent/fig_ok is not an executable");
+  const std::string manifest = TempPath("figures_bad_manifest.json");
+  std::ofstream(manifest) << R"({"figures": [{"name": "x", "paper": "p", "title": "t", "caption": "c",
+      "program": "fig_ok", "full_args": [], "quick_args": [], "full_time": "", "images": [], "files": [],
+      "numbers": [{"label": "l", "csv": "../up.csv", "column": "c", "reduce": "value"}]}]})";
+  expect_refused("figures --manifest '" + manifest + "' --programs '" + s.programs + "' --out '" + out + "'",
+                 "must be a relative path inside the figure's folder");
+  std::ofstream(manifest) << R"({"figures": [{"name": "x", "paper": "p", "title": "t", "caption": "c",
+      "program": "fig_ok", "full_args": [], "quick_args": [], "full_time": "", "images": [], "files": [],
+      "numbers": [{"label": "l", "csv": "a.csv", "column": "c", "reduce": "mode"}]}]})";
+  expect_refused("figures --manifest '" + manifest + "' --programs '" + s.programs + "' --out '" + out + "'",
+                 "unknown reduce 'mode'");
+  expect_refused(Options(s, out) + " --workers 0", "--workers");
+}
+
+}  // namespace
+}  // namespace diffdyn
