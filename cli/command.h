@@ -14,10 +14,15 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <string>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+
+namespace diffdyn {
+class SweepQueue;  // solvers/sweep.h
+}  // namespace diffdyn
 
 namespace diffdyn::cli {
 
@@ -50,6 +55,23 @@ void AddCommonOptions(CLI::App* command, CommonOptions& options);
 /// Prints `summary` as one line of JSON on stdout. A non-finite number anywhere
 /// in it is a runtime failure (NumericalError naming the key), never printed.
 void PrintJson(const nlohmann::json& summary);
+
+/// Where the tasks of a sweep ran (RunSweepTasks).
+struct SweepPlacement {
+  /// False on the ranks other than 0 under mpirun: rank 0 holds the results and reports.
+  bool coordinator = true;
+  int ranks = 1;
+  int workers = 1;
+};
+
+/// Runs the pending tasks of `queue` on the ranks of mpirun when this process was
+/// started by it (solvers/sweep_mpi.h), else on `workers` local child processes at
+/// once (0: the number of cores; solvers/sweep.h). `executable` runs tasks that name
+/// no program of their own. Throws std::runtime_error under mpirun without MPI.
+SweepPlacement RunSweepTasks(const std::filesystem::path& executable, SweepQueue& queue, int workers);
+
+/// This process's rank under mpirun (OMPI_COMM_WORLD_RANK or PMIX_RANK), else 0.
+int MpiRankFromEnvironment();
 
 /// Registers every subcommand on `app` (commands.cc).
 void RegisterCommands(CLI::App& app);

@@ -6,7 +6,8 @@
 //   diffdyn figures --only hjb_pendulum --out figs
 //
 // Figure NAME writes into DIR/NAME/; its program's stdout and stderr go to
-// DIR/tasks/<i>/. The figures to run, their arguments and the numbers the page
+// DIR/tasks/<i>/. Under `mpirun -np N diffdyn figures ...` the figures run on the
+// ranks (as `diffdyn sweep` does) and rank 0 writes the page. The figures to run, their arguments and the numbers the page
 // shows come from paper_figures/figures.json. With --resume, a figure whose
 // run is recorded in DIR with the same arguments is not run again.
 #include <algorithm>
@@ -141,11 +142,12 @@ void RunFigures(const FiguresOptions& o, const std::string& invocation) {
   fs::create_directories(out / "tasks", ec);
   if (ec) throw std::runtime_error(StrCat(o.out, ": cannot create the folder: ", ec.message()));
   const SweepFolder folder(out);
-  if (!o.resume) {
+  const bool lead = MpiRankFromEnvironment() == 0;  // under mpirun only rank 0 clears and reports
+  if (!o.resume && lead) {
     for (const SweepTask& t : tasks) fs::remove(folder.TaskDir(t.index) / "result.json", ec);
   }
 
-  if (!o.quiet) {
+  if (!o.quiet && lead) {
     for (const FigureEntry* e : figures) {
       fmt::print(stderr, "figures: {} ({}){}\n", e->name, e->paper, o.quick ? "" : "; full run: " + e->full_time);
     }
@@ -156,7 +158,7 @@ void RunFigures(const FiguresOptions& o, const std::string& invocation) {
                  r.exit_code, r.seconds);
     }
   });
-  RunSweepLocal(fs::read_symlink("/proc/self/exe"), queue, o.workers);
+  if (!RunSweepTasks(fs::read_symlink("/proc/self/exe"), queue, o.workers).coordinator) return;
 
   std::vector<FigureRun> runs;
   std::vector<std::string> failed;
@@ -177,7 +179,8 @@ void RunFigures(const FiguresOptions& o, const std::string& invocation) {
     PrintJson({{"figures", figures.size()}, {"done", figures.size()}, {"failed", 0}, {"seconds", seconds},
                {"index_path", page.string()}});
   } else {
-    fmt::print("{} figures in {:.1f} s; page: {}\n", figures.size(), seconds, page.string());
+    fmt::print("{} figure{} in {:.1f} s; page: {}\n", figures.size(), figures.size() == 1 ? "" : "s", seconds,
+               page.string());
   }
 }
 
@@ -192,7 +195,7 @@ void RegisterFiguresCommand(CLI::App& app) {
       ->check(OutputPath(/*folder=*/true));
   command->add_option("--only", o->only, "Comma-separated figure names (default: all; see paper_figures/figures.json)");
   command->add_flag("--quick", o->quick, "Small sizes (minutes): every figure is produced, numbers not comparable");
-  command->add_option("--workers", o->workers, "Figures run at once (each uses both cores itself)")
+  command->add_option("--workers", o->workers, "Figures run at once without mpirun (each uses both cores itself)")
       ->check(Bounded(1, 64))
       ->capture_default_str();
   command->add_flag("--resume", o->resume, "Keep the figures already recorded in --out with the same arguments");

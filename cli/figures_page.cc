@@ -370,8 +370,8 @@ void WriteFiguresPage(const fs::path& path, const std::vector<FigureRun>& runs, 
                                  : "Full run.")
          << "<br>Command: <code>" << Escape(info.invocation) << "</code><br>Machine: " << Escape(info.machine)
          << ". Date: " << Escape(info.date) << ". Wall time " << fmt::format("{:.1f}", info.seconds) << " s.</p>\n";
-    html << "<p>" << runs.size() << " figures, " << failed << " failed. " << judged
-         << " numbers have an acceptance bound; " << misses.size() << " miss it"
+    html << "<p>" << runs.size() << (runs.size() == 1 ? " figure, " : " figures, ") << failed << " failed. " << judged
+         << " numbers have an acceptance bound; " << misses.size() << (misses.size() == 1 ? " misses it" : " miss it")
          << (misses.empty() ? "." : ":") << "</p>\n";
     if (!misses.empty()) {
       html << "<ul class=\"bad\">\n";

@@ -8,9 +8,10 @@
 // before anything runs. Tasks whose result is recorded in --out with the same
 // arguments are not run again. A failed task is recorded with its exit code and
 // the sweep goes on; the sweep itself exits 0 once every task has a result.
-#include <chrono>
-#include <filesystem>
 #include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
 #include <map>
 #include <stdexcept>
 #include <string>
@@ -95,21 +96,9 @@ void RunSweep(const SweepCommandOptions& o, const CLI::App& root) {
     fmt::print(stderr, "sweep: {} of {} tasks already recorded in {}, not run again\n", queue.RecordedCount(),
                tasks.size(), o.out);
   }
-  int ranks = 1;
-  int workers = o.workers > 0 ? o.workers : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  if (LaunchedByMpirun()) {
-#ifdef DIFFDYN_HAVE_MPI
-    const MpiSweepOutcome outcome = RunSweepMpi(executable, queue);
-    if (!outcome.coordinator) return;  // rank 0 reports
-    ranks = outcome.ranks;
-    workers = 1;
-#else
-    throw std::runtime_error("sweep: started by mpirun, but this diffdyn was built without MPI "
-                             "(install libopenmpi-dev and rebuild)");
-#endif
-  } else {
-    RunSweepLocal(executable, queue, workers);
-  }
+  const SweepPlacement placement = RunSweepTasks(executable, queue, o.workers);
+  if (!placement.coordinator) return;  // rank 0 reports
+  const int ranks = placement.ranks, workers = placement.workers;
   WriteSweepResults(spec, tasks, queue.Results(), results_path);
 
   std::size_t done = 0;
@@ -128,6 +117,31 @@ void RunSweep(const SweepCommandOptions& o, const CLI::App& root) {
 }
 
 }  // namespace
+
+SweepPlacement RunSweepTasks(const fs::path& executable, SweepQueue& queue, int workers) {
+  SweepPlacement placement;
+  if (LaunchedByMpirun()) {
+#ifdef DIFFDYN_HAVE_MPI
+    const MpiSweepOutcome outcome = RunSweepMpi(executable, queue);
+    placement.coordinator = outcome.coordinator;
+    placement.ranks = outcome.ranks;
+    return placement;
+#else
+    throw std::runtime_error("started by mpirun, but this diffdyn was built without MPI "
+                             "(install libopenmpi-dev and rebuild)");
+#endif
+  }
+  placement.workers = workers > 0 ? workers : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  RunSweepLocal(executable, queue, placement.workers);
+  return placement;
+}
+
+int MpiRankFromEnvironment() {
+  for (const char* name : {"OMPI_COMM_WORLD_RANK", "PMIX_RANK"}) {
+    if (const char* value = std::getenv(name)) return std::atoi(value);
+  }
+  return 0;
+}
 
 void RegisterSweepCommand(CLI::App& app) {
   auto* command = app.add_subcommand(

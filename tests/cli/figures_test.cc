@@ -122,6 +122,24 @@ TEST(Figures, AFailingFigureIsARuntimeFailureWithThePageWritten) {
   EXPECT_EQ(ReadAll(out + "/ok/runs.txt"), "run\nrun\n");
 }
 
+TEST(Figures, MpirunWithTwoRanksWritesTheSamePage) {
+#if !defined(DIFFDYN_MPIEXEC)
+  GTEST_SKIP() << "built without MPI";
+#else
+  const StandIns s = MakeStandIns("figures_mpi", false);
+  const std::string out = TempPath("figures_mpi_out");
+  fs::remove_all(out);
+  const std::string launcher =
+      "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_btl_vader_single_copy_mechanism=none "
+      "OMPI_MCA_rmaps_base_oversubscribe=1 ASAN_OPTIONS=detect_leaks=0 " DIFFDYN_MPIEXEC " -np 2 ";
+  const auto r = RunDiffdyn(Options(s, out) + " --json", launcher);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(CountLines(r.out), 1) << r.out;  // only rank 0 reports
+  EXPECT_NE(ReadAll(out + "/index.html").find("data-reduce=\"median\">2</td>"), std::string::npos);
+  EXPECT_EQ(CheckPage(out + "/index.html"), 0);
+#endif
+}
+
 TEST(Figures, BadInputIsOneLineExitTwoAndNothingWritten) {
   const StandIns s = MakeStandIns("figures_bad", false);
   const std::string out = TempPath("figures_bad_out");
