@@ -52,7 +52,7 @@ test-asan:
 fuzz-quick:
 	@scripts/install-deps --ci
 	@cmake --preset debug-asan >/dev/null
-	@cmake --build --preset debug-asan -j $(JOBS) --target fuzz_dataset fuzz_measured fuzz_model_file fuzz_params fuzz_options fuzz_sweep_spec
+	@cmake --build --preset debug-asan -j $(JOBS) --target fuzz_dataset fuzz_measured fuzz_model_file fuzz_params fuzz_options fuzz_sweep_spec fuzz_figure_manifest
 	@ctest --test-dir build-asan -L fuzz -j $(JOBS) --output-on-failure
 
 demo: build

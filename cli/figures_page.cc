@@ -118,6 +118,18 @@ FigureEntry ReadEntry(const json& j, const std::string& where) {
   return e;
 }
 
+std::vector<FigureEntry> FiguresFromJson(const json& j, const std::string& where) {
+  DIFFDYN_CHECK(j.is_object() && j.contains("figures") && j["figures"].is_array(), where,
+                ": must be an object with an array 'figures'");
+  std::vector<FigureEntry> out;
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < j["figures"].size(); ++i) {
+    out.push_back(ReadEntry(j["figures"][i], StrCat(where, ": figures[", i, "]")));
+    DIFFDYN_CHECK(names.insert(out.back().name).second, where, ": figure '", out.back().name, "' given twice");
+  }
+  return out;
+}
+
 // ---------------------------------------------------------------------------
 // CSV cells.
 
@@ -282,17 +294,11 @@ constexpr const char* kStyle =
 }  // namespace
 
 std::vector<FigureEntry> ReadFigureManifest(const fs::path& path) {
-  const json j = ReadJsonFile(path);
-  const std::string where = path.string();
-  DIFFDYN_CHECK(j.is_object() && j.contains("figures") && j["figures"].is_array(), where,
-                ": must be an object with an array 'figures'");
-  std::vector<FigureEntry> out;
-  std::set<std::string> names;
-  for (std::size_t i = 0; i < j["figures"].size(); ++i) {
-    out.push_back(ReadEntry(j["figures"][i], StrCat(where, ": figures[", i, "]")));
-    DIFFDYN_CHECK(names.insert(out.back().name).second, where, ": figure '", out.back().name, "' given twice");
-  }
-  return out;
+  return FiguresFromJson(ReadJsonFile(path), path.string());
+}
+
+std::vector<FigureEntry> ParseFigureManifest(std::string_view text, const std::string& name) {
+  return FiguresFromJson(ParseJsonText(text, name), name);
 }
 
 NumberValue EvaluateFigureNumber(const FigureNumber& number, const fs::path& figure_dir) {

@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -46,6 +47,9 @@ struct FigureEntry {
 /// wrong type, an unknown reduction, a path leaving the figure's folder or a
 /// repeated figure name.
 std::vector<FigureEntry> ReadFigureManifest(const std::filesystem::path& path);
+
+/// The same on the manifest's text, named `name` in errors (the fuzz target's entry).
+std::vector<FigureEntry> ParseFigureManifest(std::string_view text, const std::string& name);
 
 /// A number's value, or why there is none.
 struct NumberValue {
