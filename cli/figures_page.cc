@@ -235,8 +235,8 @@ std::string WhereText(const FigureNumber& n) {
   return out;
 }
 
-void WriteNumberRow(std::ostream& html, const FigureEntry& e, const FigureNumber& n, const fs::path& root) {
-  const NumberValue v = EvaluateFigureNumber(n, root / e.name);
+void WriteNumberRow(std::ostream& html, const FigureEntry& e, const FigureNumber& n, const NumberValue& v,
+                    const fs::path& root) {
   const std::string csv = e.name + "/" + n.csv;
   html << "<tr><td>" << Escape(n.label) << "</td>";
   html << "<td class=\"ours\" data-csv=\"" << Escape(csv) << "\" data-where=\"" << Escape(WhereText(n))
@@ -255,7 +255,8 @@ void WriteNumberRow(std::ostream& html, const FigureEntry& e, const FigureNumber
        << "</td></tr>\n";
 }
 
-void WriteFigure(std::ostream& html, const FigureRun& run, const fs::path& root) {
+void WriteFigure(std::ostream& html, const FigureRun& run, const std::vector<NumberValue>& values,
+                 const fs::path& root) {
   const FigureEntry& e = *run.entry;
   html << "<section id=\"" << e.name << "\">\n<h2>" << Escape(e.paper) << ": " << Escape(e.title) << "</h2>\n";
   html << "<p>" << Escape(e.caption) << "</p>\n";
@@ -281,7 +282,7 @@ void WriteFigure(std::ostream& html, const FigureRun& run, const fs::path& root)
   }
   html << "</p>\n<table>\n<tr><th>quantity</th><th>ours</th><th>reference</th><th>source</th>"
           "<th>ours / reference</th><th>acceptance</th><th>verdict</th><th>from</th></tr>\n";
-  for (const FigureNumber& n : e.numbers) WriteNumberRow(html, e, n, root);
+  for (std::size_t i = 0; i < e.numbers.size(); ++i) WriteNumberRow(html, e, e.numbers[i], values[i], root);
   html << "</table>\n</section>\n";
 }
 
@@ -357,14 +358,17 @@ std::string DescribeMachine() {
 
 void WriteFiguresPage(const fs::path& path, const std::vector<FigureRun>& runs, const PageInfo& info) {
   const fs::path root = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+  // Every number is read from its CSV once, for the summary and the tables.
+  std::vector<std::vector<NumberValue>> values(runs.size());
   std::vector<std::string> misses;
   std::size_t judged = 0, failed = 0;
-  for (const FigureRun& run : runs) {
-    failed += run.exit_code != 0;
-    for (const FigureNumber& n : run.entry->numbers) {
-      const std::string v = Verdict(n, EvaluateFigureNumber(n, root / run.entry->name));
+  for (std::size_t r = 0; r < runs.size(); ++r) {
+    failed += runs[r].exit_code != 0;
+    for (const FigureNumber& n : runs[r].entry->numbers) {
+      values[r].push_back(EvaluateFigureNumber(n, root / runs[r].entry->name));
+      const std::string v = Verdict(n, values[r].back());
       judged += v == "meets" || v == "misses";
-      if (v == "misses") misses.push_back(run.entry->paper + ": " + n.label);
+      if (v == "misses") misses.push_back(runs[r].entry->paper + ": " + n.label);
     }
   }
   WriteFileAtomically(path, [&](std::ostream& html) {
@@ -390,7 +394,7 @@ void WriteFiguresPage(const fs::path& path, const std::vector<FigureRun>& runs, 
            << Escape(run.entry->title) << "</a></li>\n";
     }
     html << "</ul>\n";
-    for (const FigureRun& run : runs) WriteFigure(html, run, root);
+    for (std::size_t r = 0; r < runs.size(); ++r) WriteFigure(html, runs[r], values[r], root);
     html << "</body></html>\n";
   });
 }
