@@ -95,7 +95,12 @@ std::vector<SweepTask> MakeTasks(const std::vector<const FigureEntry*>& figures,
     task.program = fs::path(o.programs) / e->program;
     DIFFDYN_CHECK(::access(task.program.c_str(), X_OK) == 0, "--programs: ", task.program.string(),
                   " is not an executable (build the figure_* targets, or point --programs at them)");
-    for (const std::string& arg : o.quick ? e->quick_args : e->full_args) task.args.push_back(Substitute(arg, o.data));
+    for (const std::string& arg : o.quick ? e->quick_args : e->full_args) {
+      task.args.push_back(Substitute(arg, o.data));
+      // A path under the data folder is checked now, not when the figure fails.
+      DIFFDYN_CHECK(arg.find("{data}") == std::string::npos || fs::exists(task.args.back()), "--data: ",
+                    task.args.back(), " does not exist (figure ", e->name, " reads it)");
+    }
     task.args.insert(task.args.end(), {"--out", (fs::path(o.out) / e->name).string(), "--plot"});
     tasks.push_back(std::move(task));
   }

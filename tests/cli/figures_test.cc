@@ -2,9 +2,9 @@
 // write a CSV and a PNG), so the command is tested apart from the papers' figures:
 // the page's numbers, ratios and verdicts, the independent page checker
 // (scripts/check_figures_page.py) passing on it and failing on a changed number or
-// a missing image, a failing figure (exit 1, page still written), and bad input
-// (one line, exit 2, nothing written). The real figures' quick run is the ctest
-// paper_figures.figures_quick.
+// a missing image, a failing figure (exit 1, page still written), and bad input,
+// a missing {data} file among it (one line, exit 2, nothing written). The real
+// figures' quick run is the ctest paper_figures.figures_quick.
 #include <sys/wait.h>
 
 #include <cstdlib>
@@ -166,6 +166,12 @@ TEST(Figures, BadInputIsOneLineExitTwoAndNothingWritten) {
   expect_refused("figures --manifest '" + manifest + "' --programs '" + s.programs + "' --out '" + out + "'",
                  "unknown reduce 'mode'");
   expect_refused(Options(s, out) + " --workers 0", "--workers");
+  std::ofstream(manifest) << R"({"figures": [{"name": "x", "paper": "p", "title": "t", "caption": "c",
+      "program": "fig_ok", "full_args": ["--data", "{data}/missing.csv"], "quick_args": ["--data", "{data}/missing.csv"],
+      "full_time": "", "images": [], "files": [], "numbers": []}]})";
+  expect_refused("figures --manifest '" + manifest + "' --programs '" + s.programs + "' --data /nonexistent --out '" +
+                     out + "'",
+                 "--data: /nonexistent/missing.csv does not exist (figure x reads it)");
 }
 
 }  // namespace
