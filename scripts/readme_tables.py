@@ -24,9 +24,20 @@ each column equals its value; `*` takes any value). In the cells, `{expr}` or
 column name is its value (a number where it parses as one); with several, a
 list of the values, for median, mean, min, max, sum, len; at(values, column,
 value, ...) is the entry of the one row whose columns equal the values (a grid
-cell: at(val_loss, hidden, 32)). sci(x, digits=3) writes 1.38e-4.
+cell: at(val_loss, hidden, 32)); pick(values, column, value, ...) the entries of
+all such rows. sci(x, digits=3) writes 1.38e-4.
 
-    readme_tables.py --check README.md...   exit 1 and a diff if a table differs
+A number in running text is tied to its results the same way, by a comment
+right after it:
+
+    300/300<!-- = {successes}/{starts} from results/summary.csv controller=hjb -->
+
+`= TEMPLATE from CSV [FILTER]`: the text just before the comment must end with
+the rendered TEMPLATE (a FILTER of `column=value,...` as above; without one,
+the CSV must have one row or the expressions take lists). --write replaces the
+token before the comment (letters, digits and . + - / %).
+
+    readme_tables.py --check README.md...   exit 1 and a diff if a table or number differs
     readme_tables.py --write README.md...   rewrite the tables in place
 Bad specs and missing files or columns: `error: FILE:LINE: ...`, exit 2.
 """
@@ -41,6 +52,10 @@ from pathlib import Path
 
 BEGIN = re.compile(r"^<!-- table from (\S+(?:\s+\S+)*)\s*$")
 END = "<!-- end table -->"
+INLINE = re.compile(r"<!-- = (.+?) from (\S+)(?: (\S+))? -->")
+# The number before an inline comment: 300/300, 1.38e-4, -0.5, 12 %; a sign only
+# after a space or an opening mark, so the range "17-21" ends in the token "21".
+TOKEN = re.compile(r"(?:(?<=[\s(*=≈~\[])[-+]|^[-+])?[0-9A-Za-z.%/]+(?:[eE][-+][0-9]+)?$")
 
 
 class SpecError(Exception):
@@ -65,22 +80,30 @@ def sci(x, digits=3):
     return f"{mantissa}e{int(exponent)}"
 
 
+def pick(values, *keys_and_values):
+    """The entries of `values` in the rows whose columns equal the given values:
+    median(pick(torque_mse, model, "delan"))."""
+    if len(keys_and_values) % 2:
+        raise ValueError("pick(values, column, value, ...) takes column-value pairs")
+    pairs = [(c if isinstance(c, list) else [c], v)
+             for c, v in zip(keys_and_values[::2], keys_and_values[1::2])]
+    values = values if isinstance(values, list) else [values]
+    return [x for i, x in enumerate(values) if all(c[i] == v for c, v in pairs)]
+
+
 def at(values, *keys_and_values):
     """The one entry of `values` in the row whose columns equal the given values:
     at(val_loss, hidden, 32) or at(mse_j, seed, 1, loss, "f+J")."""
     if len(keys_and_values) % 2:
         raise ValueError("at(values, column, value, ...) takes column-value pairs")
-    pairs = [(c if isinstance(c, list) else [c], v)
-             for c, v in zip(keys_and_values[::2], keys_and_values[1::2])]
-    values = values if isinstance(values, list) else [values]
-    found = [x for i, x in enumerate(values) if all(c[i] == v for c, v in pairs)]
+    found = pick(values, *keys_and_values)
     if len(found) != 1:
-        raise ValueError(f"{len(found)} rows match {[v for _, v in pairs]}")
+        raise ValueError(f"{len(found)} rows match {list(keys_and_values[1::2])}")
     return found[0]
 
 
 FUNCTIONS = {
-    "at": at,
+    "at": at, "pick": pick,
     "median": statistics.median, "mean": statistics.fmean, "min": min, "max": max,
     "sum": sum, "len": len, "sci": sci, "round": round, "abs": abs,
 }
@@ -145,16 +168,40 @@ def render_table(spec_lines, csv_paths, where_of):
     return out
 
 
+def render_inline(line, readme, lineno):
+    """`line` with the number before each `<!-- = ... -->` comment regenerated."""
+    out, last = [], 0
+    for m in INLINE.finditer(line):
+        where = f"{readme}:{lineno}"
+        template, name, flt = m.group(1), m.group(2), m.group(3)
+        path = readme.parent / name
+        if not path.is_file():
+            raise SpecError(f"{where}: {name}: no such file")
+        rows = read_csv(path)
+        if not rows:
+            raise SpecError(f"{where}: {name} has no rows")
+        value = render_cells(template, select(rows, flt, where) if flt else rows, where)
+        token = TOKEN.search(line[:m.start()])
+        if token is None or token.start() < last:
+            raise SpecError(f"{where}: no number before the comment '{m.group(0)}'")
+        out.append(line[last:token.start()] + value + m.group(0))
+        last = m.end()
+    out.append(line[last:])
+    return "".join(out)
+
+
 def process(readme):
-    """(old lines, new lines) of the README with every table regenerated."""
+    """(old lines, new lines) of the README with every table and inline number
+    regenerated."""
     lines = readme.read_text().split("\n")
     new, i = [], 0
     while i < len(lines):
         m = BEGIN.match(lines[i])
-        new.append(lines[i])
         if not m:
+            new.append(render_inline(lines[i], readme, i + 1) if "<!-- = " in lines[i] else lines[i])
             i += 1
             continue
+        new.append(lines[i])
         start = i
         close = next((j for j in range(i + 1, len(lines)) if lines[j].strip() == "-->"), None)
         if close is None:
@@ -195,10 +242,10 @@ def main():
             continue
         if args.write:
             readme.write_text("\n".join(new))
-            print(f"{readme}: tables rewritten")
+            print(f"{readme}: tables and numbers rewritten")
         else:
             differ += 1
-            print(f"error: {readme}: a table disagrees with the results it cites "
+            print(f"error: {readme}: a table or number disagrees with the results it cites "
                   f"(scripts/readme_tables.py --write {readme} rewrites it)", file=sys.stderr)
             sys.stderr.writelines(difflib.unified_diff(
                 [s + "\n" for s in old], [s + "\n" for s in new], str(readme), "from the results"))

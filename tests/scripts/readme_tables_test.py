@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
-"""scripts/readme_tables.py on a README it writes itself: a table that agrees
-passes; a changed result fails with a diff; --write repairs it; bad specs exit 2."""
+"""scripts/readme_tables.py on a README it writes itself: a table or an inline
+number that agrees passes; a changed result fails with a diff; --write repairs
+it; bad specs exit 2."""
 import subprocess
 import sys
 import tempfile
@@ -25,6 +26,9 @@ model=b: | B | {seed} | {err:.2f} |
 | B | 7 | 0.25 |
 | paper | | 0.5 |
 <!-- end table -->
+
+B's error is **0.25<!-- = {err:.2f} from results/scores.csv model=b -->**, A's median
+2.00e-4<!-- = {sci(median(err))} from results/scores.csv model=a,seed=* --> over 3<!-- = {len(seed)} from results/scores.csv model=a,seed=* --> seeds.
 """
 
 CSV = "model,seed,err\na,0,0.000138005\na,1,0.0002\na,2,0.0003\nb,7,0.25\n"
@@ -56,8 +60,11 @@ def main():
         expect("-| B | 7 | 0.25 |" in r.stderr and "+| B | 7 | 0.31 |" in r.stderr, "the diff names the row")
         expect(readme.read_text() == README, "--check leaves the README as it was")
 
+        expect("-B's error is **0.25<!--" in r.stderr and "+B's error is **0.31<!--" in r.stderr,
+               "the diff names the inline number")
         r = run("--write", str(readme))
         expect(r.returncode == 0 and "| B | 7 | 0.31 |" in readme.read_text(), "--write repairs the table")
+        expect("B's error is **0.31<!-- =" in readme.read_text(), "--write repairs the inline number")
         expect(run("--check", str(readme)).returncode == 0, "the repaired table passes")
 
         # Two CSVs with the same columns: their rows in turn.
@@ -75,6 +82,11 @@ def main():
             (README.replace("{err:.2f}", "{erro:.2f}"), "cannot evaluate"),
             (README.replace("<!-- end table -->\n", ""), "without '<!-- end table -->'"),
             (README.replace("results/scores.csv", "results/none.csv"), "no such file"),
+            (README.replace("from results/scores.csv model=b -->", "from results/none.csv model=b -->"),
+             "results/none.csv: no such file"),
+            (README.replace("{len(seed)} from results/scores.csv model=a,seed=*", "{len(seed)} from results/scores.csv model=z"),
+             "no CSV row matches 'model=z'"),
+            (README.replace("**0.25<!--", "** <!--"), "no number before the comment"),
         ]:
             readme.write_text(bad)
             r = run("--check", str(readme))
