@@ -92,7 +92,7 @@ void RegisterDiagnoseCommand(CLI::App& app) {
   command->add_option("--rollout-horizon", o->request.pipeline.rollout_horizon, "Rollout window (s)")
       ->check(Bounded(1e-3, 1e4));
   command->add_option("--min-effect-to-noise", o->request.pipeline.min_effect_to_noise,
-                      "Smallest named effect: torque RMS / sensor-noise sigma")
+                      "Smallest named effect: torque RMS_j / sensor-noise sigma_j (system-wide effects: RMS over the joints)")
       ->check(Bounded(0, 1e6));
   command->add_option("--alpha", o->request.pipeline.alpha,
                       "Family-wise error of the selection: chance of naming any absent effect")

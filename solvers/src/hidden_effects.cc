@@ -86,8 +86,12 @@ HiddenEffectCase GenerateHiddenEffectCase(const std::string& model_name, std::ui
     id_ref.col(k) = model->InverseDynamics(q, qd, qdd, p);
     tip.col(k) = model->TipLoad(q, qd, qdd, p);
   }
-  // One torque-sensor noise level for every joint: 0.5 % of the overall torque RMS.
+  // Torque-sensor noise: one level (0.5 % of the overall torque RMS) or per joint
+  // (1 % of the joint's own torque RMS).
   out.tau_noise = Eigen::VectorXd::Constant(n, 0.005 * std::sqrt(id_ref.squaredNorm() / id_ref.size()));
+  if (options.per_joint_noise) {
+    for (int j = 0; j < n; ++j) out.tau_noise[j] = 0.01 * Rms(id_ref.row(j).transpose());
+  }
 
   std::vector<Effect> effects;
   if (!control) {

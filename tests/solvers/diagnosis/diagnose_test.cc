@@ -159,6 +159,31 @@ TEST(Diagnosis, FindsHiddenDelayOnCartPole) { ExpectFound("cartpole", EffectKind
 
 TEST(Diagnosis, FindsHiddenFrictionOnPanda) { ExpectFound("panda", EffectKind::kCoulomb, 5); }
 
+// Sensors scaled to their joint's torque: the Panda's wrist is far quieter than
+// its shoulder. A payload whose torque RMS is 0.9 times the pooled noise of all
+// joints stands out on the wrist; the effect-size gate weighs each joint by its
+// own sigma, so the payload is named and nothing else is (against the pooled
+// sigma it fell below 1 and wrist springs and offsets took its place).
+TEST(Diagnosis, FindsASmallPandaPayloadAgainstPerJointNoise) {
+  HiddenEffectOptions options;
+  options.kinds = {EffectKind::kPayload};
+  options.duration = 12.0;
+  options.per_joint_noise = true;
+  options.ratio_min = options.ratio_max = 0.9;  // payload torque RMS / pooled noise RMS
+  const HiddenEffectCase c = GenerateHiddenEffectCase("panda", 7, false, options);
+  ASSERT_GT(c.tau_noise.maxCoeff(), 20 * c.tau_noise.minCoeff());
+  const auto m = MakeAnalyticModel("panda");
+  const DiagnosisResult r = Diagnose(m, m->DefaultParams(), c.data, DiagnosisOptions{});
+  double error = 0;
+  EXPECT_TRUE(MatchesHiddenEffect("panda", c.effect, r.named_effects, 0.15, &error))
+      << "payload " << c.effect.params[0] << " kg, error " << error << "; selection: " << [&] {
+           std::string log;
+           for (const SelectionStep& s : r.steps) log += s.candidate + ": " + s.reason + "; ";
+           return log;
+         }();
+  EXPECT_EQ(r.named_effects.size(), 1u);
+}
+
 TEST(Diagnosis, NamesNothingWithoutAnEffect) {
   for (const std::string model : {"pendulum", "cartpole"}) {
     const HiddenEffectCase c = GenerateHiddenEffectCase(model, 6, true);

@@ -14,7 +14,8 @@
 //                candidate is named only if its likelihood-ratio test passes Holm's
 //                family-wise threshold alpha / (P - |S|), its cross-validated error
 //                falls, every value stays in its admissible range and its torque is
-//                at least min_effect_to_noise times the joint's sensor noise;
+//                at least min_effect_to_noise times the joint's sensor noise
+//                (a system-wide effect: RMS over the joints of RMS_j / sigma_j);
 //   refit        (refit.h) the named effects' parameters refitted jointly through
 //                the extended model (Ceres, bounded to the admissible ranges); an
 //                effect the joint refit puts within 3 standard errors of absent
@@ -54,7 +55,7 @@ struct DiagnosisOptions {
   double cutoff_hz = 0.0;            ///< smoothing cutoff f_c (Hz, <= 10); 0 = min(10, f_s / 4)
   double holdout_fraction = 0.3;     ///< last fraction of the rows held out
   int folds = 5;                     ///< blocked cross-validation folds
-  double min_effect_to_noise = 1.0;  ///< an effect's torque RMS / sensor-noise sigma to count
+  double min_effect_to_noise = 1.0;  ///< an effect's torque RMS_j / noise sigma_j to count (system-wide: RMS over j)
   double alpha = 0.01;               ///< family-wise error of the selection (selection.h)
   int max_effects = 8;               ///< at most this many named effects
   double residual_min_gain = 0.2;    ///< validation SSE drop needed to name "residual"

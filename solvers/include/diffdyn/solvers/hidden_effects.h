@@ -35,6 +35,10 @@ struct HiddenEffectOptions {
   double ratio_max = 10.0;    ///< upper end
   double q_noise = 1e-4;      ///< position-sensor noise sigma (rad or m)
   double qd_noise = 2e-3;     ///< velocity-sensor noise sigma (rad/s or m/s)
+  /// Torque-sensor noise: false, one sigma for every joint (0.5 % of the overall
+  /// torque RMS); true, sigma_j = 1 % of joint j's own torque RMS, as sensors
+  /// scaled to their joint's range give (a Panda's wrist far quieter than its shoulder).
+  bool per_joint_noise = false;
   std::vector<EffectKind> kinds;  ///< kinds to draw from; empty = every named kind
 };
 

@@ -42,7 +42,7 @@ struct SelectionStep {
   double deviance_before = 0, deviance_after = 0;
   double p_value = 1, threshold = 0;
   double cv_before = 0, cv_after = 0;
-  double effect_to_noise = std::numeric_limits<double>::quiet_NaN();  ///< torque RMS / noise
+  double effect_to_noise = std::numeric_limits<double>::quiet_NaN();  ///< torque RMS_j / sigma_j (system-wide: RMS over j)
   bool accepted = false;
   std::string reason;
 };
@@ -96,7 +96,8 @@ std::vector<int> ForwardSelect(const SelectionProblem& problem, const SelectionO
 /// log(SSE_j(S) / rows). Vetoes: any member's value outside its admissible range
 /// (a delay also beyond 10 samples, or not beyond 1.1 T/2 + 2 stderr, T/2 the
 /// half-sample lag a zero-order hold of the torque alone produces), or c's torque RMS below min_effect_to_noise
-/// times the joint's raw noise sigma_j.
+/// times the joint's raw noise sigma_j (a system-wide effect: the root mean square over
+/// the joints of RMS_j / sigma_j).
 class LinearSelection : public SelectionProblem {
  public:
   /// `lib` must outlive the selection.
