@@ -1,5 +1,6 @@
 // diffdyn diagnose end to end: the JSON contract (noise_std, not_identifiable),
-// and an extended model fed back through --model, which has nothing missing.
+// an extended model fed back through --model, which has nothing missing, and an
+// unactuated joint that must not carry a system-wide effect through the gate.
 #include <string>
 
 #include <gtest/gtest.h>
@@ -47,6 +48,19 @@ TEST(Diagnose, AnExtendedModelFedBackHasNothingMissing) {
   EXPECT_TRUE(k.at("no_significant_discrepancy").get<bool>()) << k.at("named_effects").dump();
   EXPECT_TRUE(k.at("named_effects").empty());
   EXPECT_LT(k.at("heldout_sse_removed").get<double>(), 0.05);
+}
+
+// The cart-pole task drives the cart only: the pole's torque is zero throughout,
+// so its noise sigma is 0. A system-wide effect (gain, payload, delay) is sized on
+// the joints with a torque signal; counting the pole (size infinite) named a gain
+// of 1.006 on this record.
+TEST(Diagnose, AnUnactuatedJointDoesNotPassASystemWideEffect) {
+  const std::string data = TempPath("diag_cartpole_task.csv");
+  ASSERT_EQ(RunDiffdyn("collect --system cartpole --seed 3 --trajectories 20 --quiet --out " + data).exit_code, 0);
+  const auto j = Json(RunDiffdyn("diagnose --model cartpole --measured " + data + " --json --out " +
+                                 TempPath("diag_cartpole_task")));
+  EXPECT_EQ(j.at("noise_std")[1].get<double>(), 0.0);
+  for (const auto& e : j.at("named_effects")) EXPECT_NE(e.at("joint").get<int>(), 0) << e.dump();
 }
 
 TEST(Diagnose, RefusesAModelThatIsNeitherANameNorAFile) {

@@ -343,19 +343,25 @@ double LinearSelection::EffectToNoise(const std::vector<int>& set, int c) const 
     if (std::find(own.begin(), own.end(), cols[a]) != own.end()) part += fit.beta[a] * *columns_[cols[a]];
   }
   // Per joint RMS_j / sigma_j; a system-wide effect takes the root mean square of
-  // these over the joints, so a payload that stands out on the quiet wrist is not
+  // these over the joints with a torque signal (sigma_j > 0: an unactuated joint's
+  // zero torque has none), so a payload that stands out on the quiet wrist is not
   // drowned by the noisy shoulder's sigma (and then absorbed piecemeal by wrist
   // springs and offsets that pass their own joint's gate). The largest joint
   // instead of the mean named small gains (0.99) as extras on blind Panda cases.
-  const auto whitened = [&](int j) {
-    const double rms = std::sqrt(part.row(j).head(train_count_).squaredNorm() / train_count_);
-    const double noise = prep_.noise_std[j];
-    return noise > 0 ? rms / noise : (rms > 0 ? std::numeric_limits<double>::infinity() : 0.0);
+  const auto rms = [&](int j) { return std::sqrt(part.row(j).head(train_count_).squaredNorm() / train_count_); };
+  const auto ratio = [](double r, double noise) {
+    return noise > 0 ? r / noise : (r > 0 ? std::numeric_limits<double>::infinity() : 0.0);
   };
-  if (cand.joint > 0) return whitened(cand.joint - 1);
-  double sum = 0;
-  for (int j = 0; j < prep_.n; ++j) sum += whitened(j) * whitened(j);
-  return std::sqrt(sum / prep_.n);
+  if (cand.joint > 0) return ratio(rms(cand.joint - 1), prep_.noise_std[cand.joint - 1]);
+  double sum = 0, any = 0;
+  int sensed = 0;
+  for (int j = 0; j < prep_.n; ++j) {
+    any = std::max(any, rms(j));
+    if (prep_.noise_std[j] <= 0) continue;
+    sum += std::pow(rms(j) / prep_.noise_std[j], 2);
+    ++sensed;
+  }
+  return sensed > 0 ? std::sqrt(sum / sensed) : ratio(any, 0.0);
 }
 
 }  // namespace diffdyn
