@@ -35,15 +35,17 @@ right after it:
 `= TEMPLATE from CSV [FILTER]`: the text just before the comment must end with
 the rendered TEMPLATE (a FILTER of `column=value,...` as above; without one,
 the CSV must have one row or the expressions take lists). --write replaces the
-token before the comment (letters, digits and . + - / %).
+number before the comment (letters, digits, . / %, an exponent, and a sign
+after a space or an opening mark).
 
     readme_tables.py --check README.md...   exit 1 and a diff if a table or number differs
-    readme_tables.py --write README.md...   rewrite the tables in place
+    readme_tables.py --write README.md...   rewrite the tables and numbers in place
 Bad specs and missing files or columns: `error: FILE:LINE: ...`, exit 2.
 """
 import argparse
 import csv
 import difflib
+import functools
 import math
 import re
 import statistics
@@ -109,7 +111,9 @@ FUNCTIONS = {
 }
 
 
+@functools.lru_cache(maxsize=None)
 def read_csv(path):
+    """The rows of a CSV, read once per run however many tables and numbers cite it."""
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
     return [{k: parse_value(v) for k, v in row.items()} for row in rows]

@@ -353,15 +353,16 @@ double LinearSelection::EffectToNoise(const std::vector<int>& set, int c) const 
     return noise > 0 ? r / noise : (r > 0 ? std::numeric_limits<double>::infinity() : 0.0);
   };
   if (cand.joint > 0) return ratio(rms(cand.joint - 1), prep_.noise_std[cand.joint - 1]);
-  double sum = 0, any = 0;
+  double sum = 0, largest = 0;
   int sensed = 0;
   for (int j = 0; j < prep_.n; ++j) {
-    any = std::max(any, rms(j));
+    const double r = rms(j);
+    largest = std::max(largest, r);
     if (prep_.noise_std[j] <= 0) continue;
-    sum += std::pow(rms(j) / prep_.noise_std[j], 2);
+    sum += (r / prep_.noise_std[j]) * (r / prep_.noise_std[j]);
     ++sensed;
   }
-  return sensed > 0 ? std::sqrt(sum / sensed) : ratio(any, 0.0);
+  return sensed > 0 ? std::sqrt(sum / sensed) : ratio(largest, 0.0);
 }
 
 }  // namespace diffdyn
