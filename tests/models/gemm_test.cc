@@ -1,6 +1,7 @@
 // Gemm (the BLAS or Eigen matrix product of the batched network paths) against
 // Eigen's own products: all four transpose cases, blocks with an outer stride,
-// beta = 0 over NaN, beta = 1 accumulation, and empty sizes.
+// beta = 0 over NaN, beta = 1 accumulation, and empty sizes; float operands
+// (sgemm) against the double product of the same values.
 #include "diffdyn/models/gemm.h"
 
 #include <gtest/gtest.h>
@@ -53,6 +54,24 @@ TEST(Gemm, BetaZeroOverwritesNaNAndEmptyInnerSizeScalesC) {
   Eigen::MatrixXd empty(0, 2);
   Gemm(1.0, Eigen::MatrixXd(0, 3), false, b, false, 0.0, empty);
   EXPECT_EQ(empty.size(), 0);
+}
+
+TEST(Gemm, FloatOperandsMatchTheDoubleProductToFloatRounding) {
+  const int m = 37, n = 23, k = 101;
+  const Eigen::MatrixXf big_a = Eigen::MatrixXf::Random(k + 3, k + 3);
+  const Eigen::MatrixXf b = Eigen::MatrixXf::Random(k, n);
+  for (bool ta : {false, true}) {
+    const auto a = big_a.block(2, 1, ta ? k : m, ta ? m : k);
+    const Eigen::MatrixXd op_a = ta ? Eigen::MatrixXd(a.transpose().cast<double>())
+                                    : Eigen::MatrixXd(a.cast<double>());
+    Eigen::MatrixXf c = Eigen::MatrixXf::Constant(m, n, std::numeric_limits<float>::quiet_NaN());
+    Gemm(2.0f, a, ta, b, false, 0.0f, c);
+    const Eigen::MatrixXd expected = 2.0 * op_a * b.cast<double>();
+    // k terms of size <= 1, each rounded once: well under k float epsilons.
+    const double gap = (c.cast<double>() - expected).cwiseAbs().maxCoeff();
+    EXPECT_LT(gap, k * std::numeric_limits<float>::epsilon()) << "ta " << ta;
+    EXPECT_GT(gap, 0.0) << "ta " << ta << ": the product ran in double";
+  }
 }
 
 }  // namespace

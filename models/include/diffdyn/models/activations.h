@@ -26,7 +26,7 @@
 //   * ActivationValue / ActivationDerivative / ActivationSecondDerivative are
 //     templated on the scalar (double or ceres::Jet) for single samples;
 //   * ApplyActivation evaluates g, g' and optionally g'' over a whole array of
-//     pre-activations in one vectorised pass (the batched double path).
+//     pre-activations in one vectorised pass (the batched float and double paths).
 //
 //   Activation act = Activation::Softplus(2.0);
 //   double y = ActivationValue(act, 0.3), dy = ActivationDerivative(act, 0.3);
@@ -35,6 +35,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <type_traits>
 
 #include <Eigen/Core>
 
@@ -197,9 +198,9 @@ S ActivationSecondDerivative(const Activation& act, const S& a) {
   return S(0.0);
 }
 
-/// t[i] = tanh(x[i]) for n contiguous values, vectorised (Eigen packets), within a
-/// few ulp of std::tanh everywhere (t may alias x). Two branch-free forms, chosen
-/// per element by |x|:
+/// t[i] = tanh(x[i]) for n contiguous values of S (double or float), vectorised
+/// (Eigen packets), within a few ulp of std::tanh everywhere (t may alias x). Two
+/// branch-free forms, chosen per element by |x|:
 ///
 ///   |x| <  1/2:  the 8th convergent of Lambert's continued fraction
 ///                tanh x = x / (1 + x^2 / (3 + x^2 / (5 + ...))) = x A_8 / B_8, from
@@ -214,22 +215,25 @@ S ActivationSecondDerivative(const Activation& act, const S& a) {
 ///                cancellation, no overflow (large |x| gives e = 0, t = +-1).
 ///
 /// NaN propagates.
-inline void VectorizedTanh(const double* x, Eigen::Index n, double* t) {
+template <typename S>
+inline void VectorizedTanh(const S* x, Eigen::Index n, S* t) {
+  static_assert(std::is_floating_point_v<S>, "VectorizedTanh needs float or double");
+  using ArrayS = Eigen::Array<S, Eigen::Dynamic, 1>;
   constexpr Eigen::Index kBlock = 64;
   constexpr int kLevels = 8;
-  using Block = Eigen::Array<double, kBlock, 1>;
+  using Block = Eigen::Array<S, kBlock, 1>;
   Block e, x2, d_prev, d_cur, b_prev, b_cur, next;
   for (Eigen::Index start = 0; start < n; start += kBlock) {
     const Eigen::Index m = std::min(kBlock, n - start);
-    const Eigen::Map<const Eigen::ArrayXd> xv(x + start, m);
-    e.head(m) = (-2.0 * xv.abs()).exp();
+    const Eigen::Map<const ArrayS> xv(x + start, m);
+    e.head(m) = (S(-2) * xv.abs()).exp();
     x2.head(m) = xv * xv;
-    d_prev.head(m).setConstant(-1.0);
+    d_prev.head(m).setConstant(S(-1));
     d_cur.head(m).setZero();
     b_prev.head(m).setOnes();
     b_cur.head(m).setOnes();
     for (int k = 2; k <= kLevels; ++k) {
-      const double odd = 2.0 * k - 1.0;
+      const S odd = S(2 * k - 1);
       next.head(m) = odd * d_cur.head(m) + x2.head(m) * d_prev.head(m);
       d_prev.head(m) = d_cur.head(m);
       d_cur.head(m) = next.head(m);
@@ -238,9 +242,9 @@ inline void VectorizedTanh(const double* x, Eigen::Index n, double* t) {
       b_cur.head(m) = next.head(m);
     }
     const auto small = xv + xv * (d_cur.head(m) / b_cur.head(m));
-    const auto large = (1.0 - e.head(m)) / (1.0 + e.head(m));
-    Eigen::Map<Eigen::ArrayXd> tv(t + start, m);
-    tv = (xv.abs() < 0.5).select(small, (xv < 0.0).select(-large, large));
+    const auto large = (S(1) - e.head(m)) / (S(1) + e.head(m));
+    Eigen::Map<ArrayS> tv(t + start, m);
+    tv = (xv.abs() < S(0.5)).select(small, (xv < S(0)).select(-large, large));
   }
 }
 
@@ -249,26 +253,34 @@ namespace internal {
 // For m values z = p a[i] (m <= 64): e[i] = exp(-|z|) in (0, 1] and
 // s[i] = sigmoid(z) = 1 / (1 + exp(-z)), as 1 / (1 + e) for z >= 0 and
 // e / (1 + e) otherwise: no overflow, one division. e and s must not alias a.
-inline void SigmoidBlock(const double* a, double p, Eigen::Index m, double* e, double* s) {
-  const Eigen::Map<const Eigen::ArrayXd> av(a, m);
-  Eigen::Map<Eigen::ArrayXd> ev(e, m), sv(s, m);
+template <typename S>
+inline void SigmoidBlock(const S* a, S p, Eigen::Index m, S* e, S* s) {
+  using ArrayS = Eigen::Array<S, Eigen::Dynamic, 1>;
+  const Eigen::Map<const ArrayS> av(a, m);
+  Eigen::Map<ArrayS> ev(e, m), sv(s, m);
   ev = (-(p * av).abs()).exp();
-  sv = 1.0 / (1.0 + ev);
-  sv = (p * av >= 0.0).select(sv, ev * sv);
+  sv = S(1) / (S(1) + ev);
+  sv = (p * av >= S(0)).select(sv, ev * sv);
 }
 
 }  // namespace internal
 
-/// Batched evaluation over n contiguous pre-activations a[0..n):
-/// g[i] = g(a[i]), dg[i] = g'(a[i]) and, when ddg is not null, ddg[i] = g''(a[i]).
-/// g may alias a (in-place). dg may be null when only values are needed.
-/// Uses Eigen's vectorised exp; no allocation.
-inline void ApplyActivation(const Activation& act, const double* a, Eigen::Index n, double* g,
-                            double* dg, double* ddg) {
-  using Arr = Eigen::Map<Eigen::ArrayXd>;
-  const Eigen::Map<const Eigen::ArrayXd> av(a, n);
+/// Batched evaluation over n contiguous pre-activations a[0..n) of S (double or
+/// float): g[i] = g(a[i]), dg[i] = g'(a[i]) and, when ddg is not null,
+/// ddg[i] = g''(a[i]). g may alias a (in-place). dg may be null when only values
+/// are needed. Uses Eigen's vectorised exp; no allocation. In float the
+/// parameter p is rounded to float once.
+template <typename S>
+inline void ApplyActivation(const Activation& act, const S* a, Eigen::Index n,
+                            std::type_identity_t<S>* g, std::type_identity_t<S>* dg,
+                            std::type_identity_t<S>* ddg) {
+  static_assert(std::is_floating_point_v<S>, "ApplyActivation needs float or double");
+  using ArrayS = Eigen::Array<S, Eigen::Dynamic, 1>;
+  using Arr = Eigen::Map<ArrayS>;
+  const Eigen::Map<const ArrayS> av(a, n);
   Arr gv(g, n);
-  const double p = act.param;
+  const S p = static_cast<S>(act.param);
+  const S one(1), zero(0);
   switch (act.kind) {
     case ActivationKind::kLinear:
       if (g != a) gv = av;
@@ -279,12 +291,12 @@ inline void ApplyActivation(const Activation& act, const double* a, Eigen::Index
       // One pass: g' = [a > 0] first (g may alias a), then g = max(a, 0).
       if (dg) {
         for (Eigen::Index i = 0; i < n; ++i) {
-          const double v = a[i];
-          dg[i] = v > 0.0 ? 1.0 : 0.0;
-          g[i] = v > 0.0 ? v : 0.0;
+          const S v = a[i];
+          dg[i] = v > zero ? one : zero;
+          g[i] = v > zero ? v : zero;
         }
       } else {
-        gv = av.max(0.0);
+        gv = av.max(zero);
       }
       if (ddg) Arr(ddg, n).setZero();
       return;
@@ -292,57 +304,57 @@ inline void ApplyActivation(const Activation& act, const double* a, Eigen::Index
       // z = p a; e = exp(-|z|) in (0, 1]: no overflow; s = sigmoid(z);
       // g = (max(z, 0) + log(1 + e)) / p.
       constexpr Eigen::Index kBlock = 64;
-      double e_buf[kBlock];
-      double s_buf[kBlock];
+      S e_buf[kBlock];
+      S s_buf[kBlock];
       for (Eigen::Index start = 0; start < n; start += kBlock) {
         const Eigen::Index m = std::min(kBlock, n - start);
         internal::SigmoidBlock(a + start, p, m, e_buf, s_buf);
-        const Eigen::Map<const Eigen::ArrayXd> e(e_buf, m);
-        const Eigen::Map<const Eigen::ArrayXd> sig(s_buf, m);
+        const Eigen::Map<const ArrayS> e(e_buf, m);
+        const Eigen::Map<const ArrayS> sig(s_buf, m);
         if (dg) Arr(dg + start, m) = sig;
-        if (ddg) Arr(ddg + start, m) = p * sig * (1.0 - sig);
-        gv.segment(start, m) = ((p * av.segment(start, m)).max(0.0) + (1.0 + e).log()) / p;
+        if (ddg) Arr(ddg + start, m) = p * sig * (one - sig);
+        gv.segment(start, m) = ((p * av.segment(start, m)).max(zero) + (one + e).log()) / p;
       }
       return;
     }
     case ActivationKind::kTanh: {
       VectorizedTanh(a, n, g);
-      if (dg) Arr(dg, n) = 1.0 - gv * gv;
-      if (ddg) Arr(ddg, n) = -2.0 * gv * (1.0 - gv * gv);
+      if (dg) Arr(dg, n) = one - gv * gv;
+      if (ddg) Arr(ddg, n) = S(-2) * gv * (one - gv * gv);
       return;
     }
     case ActivationKind::kSigmoid: {
       constexpr Eigen::Index kBlock = 64;
-      double e_buf[kBlock];
-      double s_buf[kBlock];
+      S e_buf[kBlock];
+      S s_buf[kBlock];
       for (Eigen::Index start = 0; start < n; start += kBlock) {
         const Eigen::Index m = std::min(kBlock, n - start);
-        internal::SigmoidBlock(a + start, 1.0, m, e_buf, s_buf);
-        const Eigen::Map<const Eigen::ArrayXd> sig(s_buf, m);
+        internal::SigmoidBlock(a + start, one, m, e_buf, s_buf);
+        const Eigen::Map<const ArrayS> sig(s_buf, m);
         gv.segment(start, m) = sig;
-        if (dg) Arr(dg + start, m) = sig * (1.0 - sig);
-        if (ddg) Arr(ddg + start, m) = sig * (1.0 - sig) * (1.0 - 2.0 * sig);
+        if (dg) Arr(dg + start, m) = sig * (one - sig);
+        if (ddg) Arr(ddg + start, m) = sig * (one - sig) * (one - S(2) * sig);
       }
       return;
     }
     case ActivationKind::kElu: {
       constexpr Eigen::Index kBlock = 64;
-      double e_buf[kBlock];
+      S e_buf[kBlock];
       for (Eigen::Index start = 0; start < n; start += kBlock) {
         const Eigen::Index m = std::min(kBlock, n - start);
-        Eigen::Map<Eigen::ArrayXd> e(e_buf, m);
+        Eigen::Map<ArrayS> e(e_buf, m);
         const auto x = av.segment(start, m);
-        e = x.min(0.0).exp();
-        const auto pos = (x > 0.0);
-        if (dg) Arr(dg + start, m) = pos.select(1.0, p * e);
-        if (ddg) Arr(ddg + start, m) = pos.select(0.0, p * e);
-        gv.segment(start, m) = pos.select(x, p * (e - 1.0));
+        e = x.min(zero).exp();
+        const auto pos = (x > zero);
+        if (dg) Arr(dg + start, m) = pos.select(one, p * e);
+        if (ddg) Arr(ddg + start, m) = pos.select(zero, p * e);
+        gv.segment(start, m) = pos.select(x, p * (e - one));
       }
       return;
     }
     case ActivationKind::kCos: {
       for (Eigen::Index i = 0; i < n; ++i) {
-        const double c = std::cos(p * a[i]);
+        const S c = std::cos(p * a[i]);
         if (dg) dg[i] = -p * std::sin(p * a[i]);
         if (ddg) ddg[i] = -p * p * c;
         g[i] = c;

@@ -42,6 +42,14 @@
 //   net.Forward(X, &Y, &J, &ws);                   // values and Jacobians
 //   net.Backward(Gy, GJ, &grad, nullptr, &ws);     // dL/dtheta
 //   net.Evaluate(X, Y, &ws);                       // values only, no tape (fast path)
+//
+// Precision: the batched paths run in the network's scalar, double or float.
+// A float network multiplies in sgemm and keeps its scratch in an MlpWorkspaceF;
+// the parameter gradient is summed in float, chunk by chunk, as in double.
+//
+//   const Mlp<float> net_f = net.cast<float>();
+//   MlpWorkspaceF ws_f(net_f.architecture(), 256);
+//   net_f.Forward(X.cast<float>(), &Y_f, &J_f, &ws_f);  // Y_f, J_f: MatrixXf
 #pragma once
 
 #include <algorithm>
@@ -113,17 +121,20 @@ struct MlpArchitecture {
 /// the backward cotangents. Sized once (Reserve); afterwards the batched calls
 /// do not allocate for batches up to the reserved size. Not shared between
 /// concurrent calls; one model may be used with many workspaces at once.
-class MlpWorkspace {
+/// S is the scalar of the batched paths it serves (MlpWorkspace for Mlp<double>,
+/// MlpWorkspaceF for Mlp<float>).
+template <typename S>
+class BasicMlpWorkspace {
  public:
   /// Default chunk size: 256 samples per chunk (a batch of 500 = 2 chunks).
   static constexpr int kDefaultChunkSize = 256;
 
   /// Empty workspace; the first Forward sizes it.
-  MlpWorkspace() = default;
+  BasicMlpWorkspace() = default;
   /// Workspace for `arch` and batches up to `max_batch` samples, cut into
   /// chunks of `chunk_size` samples; `jacobian` reserves the Jacobian chain.
-  MlpWorkspace(const MlpArchitecture& arch, int max_batch, int chunk_size = kDefaultChunkSize,
-               bool jacobian = true)
+  BasicMlpWorkspace(const MlpArchitecture& arch, int max_batch,
+                    int chunk_size = kDefaultChunkSize, bool jacobian = true)
       : chunk_size_(chunk_size) {
     DIFFDYN_CHECK(chunk_size > 0, "MlpWorkspace: chunk size must be positive, got ", chunk_size);
     Reserve(arch, max_batch, jacobian);
@@ -156,15 +167,17 @@ class MlpWorkspace {
 
   // Buffers of one chunk of at most `chunk_size_` samples.
   struct Chunk {
-    std::vector<Eigen::MatrixXd> h;    // h_l, n_l x cap, l = 0 .. L-1
-    std::vector<Eigen::MatrixXd> dg;   // g'(a_l), hidden layers
-    std::vector<Eigen::MatrixXd> ddg;  // g''(a_l), hidden layers (Jacobian mode)
-    std::vector<Eigen::MatrixXd> u;    // U_l, n_{l+1} x n_0 cap (Jacobian mode)
-    std::vector<Eigen::MatrixXd> z;    // Z_l, n_l x n_0 cap, l >= 1 (Jacobian mode)
-    Eigen::MatrixXd abar[2], dbar, ubar[2], zbar;
-    Eigen::VectorXd weight_t;          // W_l^T of a thin layer, kThinSide x width (reverse sweep)
-    Eigen::VectorXd grad;
-    Eigen::VectorXd block;             // 2 feature-major blocks, width x kLayerBlock (Evaluate)
+    using Matrix = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
+    using Vector = Eigen::Matrix<S, Eigen::Dynamic, 1>;
+    std::vector<Matrix> h;    // h_l, n_l x cap, l = 0 .. L-1
+    std::vector<Matrix> dg;   // g'(a_l), hidden layers
+    std::vector<Matrix> ddg;  // g''(a_l), hidden layers (Jacobian mode)
+    std::vector<Matrix> u;    // U_l, n_{l+1} x n_0 cap (Jacobian mode)
+    std::vector<Matrix> z;    // Z_l, n_l x n_0 cap, l >= 1 (Jacobian mode)
+    Matrix abar[2], dbar, ubar[2], zbar;
+    Vector weight_t;          // W_l^T of a thin layer, kThinSide x width (reverse sweep)
+    Vector grad;
+    Vector block;             // 2 feature-major blocks, width x kLayerBlock (Evaluate)
     std::vector<int> rows;             // 2 lists of a block's live rows, width each (Evaluate)
     int count = 0;                 // samples in this chunk after the last Forward
     bool has_jacobian = false;     // whether the last Forward built the chain
@@ -214,10 +227,16 @@ class MlpWorkspace {
   std::vector<Chunk> chunks_;
 };
 
+/// Workspace of Mlp<double>'s batched paths.
+using MlpWorkspace = BasicMlpWorkspace<double>;
+/// Workspace of Mlp<float>'s batched paths.
+using MlpWorkspaceF = BasicMlpWorkspace<float>;
+
 /// A fully connected network with hidden activations and a linear output, held as
-/// its architecture plus one flat parameter vector of scalar type T (double, or a
-/// ceres::Jet to differentiate with respect to parameters). Immutable during
-/// evaluation: scratch lives in an MlpWorkspace.
+/// its architecture plus one flat parameter vector of scalar type T (double or
+/// float, or a ceres::Jet to differentiate with respect to parameters). The
+/// batched paths exist for T = double and T = float. Immutable during
+/// evaluation: scratch lives in an MlpWorkspace (MlpWorkspaceF for float).
 template <typename T>
 class Mlp {
  public:
@@ -228,6 +247,14 @@ class Mlp {
   /// Scalar of T * S (a Jet if either is a Jet).
   template <typename S>
   using ResultScalar = decltype(std::declval<T>() * std::declval<S>());
+  /// Scalar of the batched paths: T for float and double (double otherwise, unused).
+  using B = std::conditional_t<std::is_floating_point_v<T>, T, double>;
+  /// Matrix of B (batches, samples in columns).
+  using MatrixB = Eigen::Matrix<B, Eigen::Dynamic, Eigen::Dynamic>;
+  /// Vector of B (gradients).
+  using VectorB = Eigen::Matrix<B, Eigen::Dynamic, 1>;
+  /// Workspace of the batched paths.
+  using Workspace = BasicMlpWorkspace<B>;
 
   /// Empty network (no layers); assign a real one before use.
   Mlp() = default;
@@ -381,16 +408,17 @@ class Mlp {
   }
 
   // ---------------------------------------------------------------------------
-  // Batched double paths (samples in columns).
+  // Batched paths (samples in columns), for T = double or float: matrices of T,
+  // products in T's BLAS gemm, workspaces of T (MlpWorkspace, MlpWorkspaceF).
 
   /// Forward pass over the batch X (n_0 x B): Y = f(X) (n_L x B) and, if `jac`
   /// is not null, the stacked input Jacobians J = [J_1 ... J_B] (n_L x n_0 B).
   /// Stores what Backward needs in `ws` (which must not be used concurrently).
   /// Work is split in chunks of ws->chunk_size() samples over `threads` threads
   /// (<= 0: all cores). Y, jac are resized (allocation only if their size changes).
-  void Forward(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y, Eigen::MatrixXd* jac,
-               MlpWorkspace* ws, int threads = 1) const
-    requires std::is_same_v<T, double>
+  void Forward(const MatrixB& X, MatrixB* Y, MatrixB* jac,
+               Workspace* ws, int threads = 1) const
+    requires std::is_floating_point_v<T>
   {
     DIFFDYN_CHECK(X.rows() == num_inputs(), "MLP expects inputs with ", num_inputs(),
                   " rows, got ", X.rows());
@@ -418,9 +446,9 @@ class Mlp {
   /// terms are w * 0); each sample's value then does not depend on the batch, the
   /// chunking or the thread count. Elsewhere it runs Forward's BLAS products.
   /// Chunks of ws->chunk_size() samples over `threads` threads (<= 0: all cores).
-  void Evaluate(const Eigen::Ref<const Eigen::MatrixXd>& X, Eigen::Ref<Eigen::MatrixXd> Y,
-                MlpWorkspace* ws, int threads = 1) const
-    requires std::is_same_v<T, double>
+  void Evaluate(const Eigen::Ref<const MatrixB>& X, Eigen::Ref<MatrixB> Y,
+                Workspace* ws, int threads = 1) const
+    requires std::is_floating_point_v<T>
   {
     DIFFDYN_CHECK(X.rows() == num_inputs(), "MLP expects inputs with ", num_inputs(),
                   " rows, got ", X.rows());
@@ -430,7 +458,7 @@ class Mlp {
     const int batch = static_cast<int>(X.cols());
     ws->Reserve(arch_, batch, false);
     ws->batch_ = -1;
-    if constexpr (kHaveLayerKernel) {
+    if constexpr (kUseLayerKernel) {
       // The kernel's block buffers, only in workspaces that evaluate (not in tapes).
       const Eigen::Index block_size = Eigen::Index(2) * arch_.max_width() * kLayerBlock;
       for (int c = 0; c < NumChunks(batch, ws->chunk_size()); ++c) {
@@ -441,7 +469,7 @@ class Mlp {
     ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
       const auto x = X.middleCols(begin, end - begin);
       auto y = Y.middleCols(begin, end - begin);
-      if constexpr (kHaveLayerKernel) {
+      if constexpr (kUseLayerKernel) {
         EvaluateChunk(x, y, &ws->chunks_[c]);
       } else {
         ForwardChunk(x, y, nullptr, begin, &ws->chunks_[c]);
@@ -456,10 +484,10 @@ class Mlp {
   /// not null, grad_inputs = dL/dX (n_0 x B). Either output may be null. With
   /// `accumulate`, grad_params (already of size num_parameters()) is added to
   /// instead of overwritten.
-  void Backward(const Eigen::MatrixXd& gy, const Eigen::MatrixXd& gjac,
-                Eigen::VectorXd* grad_params, Eigen::MatrixXd* grad_inputs, MlpWorkspace* ws,
+  void Backward(const MatrixB& gy, const MatrixB& gjac,
+                VectorB* grad_params, MatrixB* grad_inputs, Workspace* ws,
                 int threads = 1, bool accumulate = false) const
-    requires std::is_same_v<T, double>
+    requires std::is_floating_point_v<T>
   {
     if (grad_params) {
       DIFFDYN_CHECK(!accumulate || grad_params->size() == num_parameters(),
@@ -478,23 +506,23 @@ class Mlp {
   /// workspace whose chunk size is at least ws's), the reverse sweep's cotangent buffers
   /// come from it instead of ws: many recorded forward passes (the stages of an
   /// ODE tape) then share one set of buffers that stays in cache.
-  void BackwardAccumulate(const Eigen::Ref<const Eigen::MatrixXd>& gy,
-                          Eigen::Ref<Eigen::VectorXd> grad_params, Eigen::MatrixXd* grad_inputs,
-                          MlpWorkspace* ws, int threads = 1, MlpWorkspace* scratch = nullptr) const
-    requires std::is_same_v<T, double>
+  void BackwardAccumulate(const Eigen::Ref<const MatrixB>& gy,
+                          Eigen::Ref<VectorB> grad_params, MatrixB* grad_inputs,
+                          Workspace* ws, int threads = 1, Workspace* scratch = nullptr) const
+    requires std::is_floating_point_v<T>
   {
     DIFFDYN_CHECK(grad_params.size() == num_parameters(), "Mlp::BackwardAccumulate: gradient has ",
                   grad_params.size(), " entries, expected ", num_parameters());
-    static const Eigen::MatrixXd kNone;
+    static const MatrixB kNone;
     BackwardImpl(gy, kNone, grad_params.data(), true, grad_inputs, ws, threads, scratch);
   }
 
   /// Input Jacobians by batched reverse mode (n_L backward sweeps stacked into
   /// one): J = [J_1 ... J_B] (n_L x n_0 B), same layout as Forward's, and
   /// Y = f(X). Cheaper than the forward chain when n_L < n_0.
-  void InputJacobianReverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y, Eigen::MatrixXd* jac,
-                            MlpWorkspace* ws, int threads = 1) const
-    requires std::is_same_v<T, double>
+  void InputJacobianReverse(const MatrixB& X, MatrixB* Y, MatrixB* jac,
+                            Workspace* ws, int threads = 1) const
+    requires std::is_floating_point_v<T>
   {
     DIFFDYN_CHECK(jac != nullptr, "Mlp::InputJacobianReverse needs an output Jacobian");
     Forward(X, Y, nullptr, ws, threads);
@@ -507,7 +535,7 @@ class Mlp {
     const int cap = ws->chunk_size();
     const int L = arch_.num_layers();
     ParallelForChunks(batch, cap, threads, [&](int c, int begin, int end) {
-      MlpWorkspace::Chunk& ch = ws->chunks_[c];
+      typename Workspace::Chunk& ch = ws->chunks_[c];
       const int nb = end - begin;
       const int width = arch_.max_width();
       // The chain below reads g' stored; ReLU's comes off its output: 1 .* [h > 0].
@@ -516,15 +544,15 @@ class Mlp {
         ch.dg[l].leftCols(nb).setOnes();
         MultiplyByReluDerivative(ch.dg[l].leftCols(nb), ch.h[l + 1].leftCols(nb));
       }
-      for (Eigen::MatrixXd& buffer : ch.ubar) {
+      for (MatrixB& buffer : ch.ubar) {
         if (buffer.rows() < width || buffer.cols() < Eigen::Index(m) * cap) {
           buffer.resize(width, std::max(buffer.cols(), Eigen::Index(m) * cap));
         }
       }
       // The m sweeps of each sample side by side: column b*m + k is output k
       // of sample b (workspace buffers ubar hold max(n_0, n_L) cap columns).
-      Eigen::MatrixXd* cur = &ch.ubar[0];
-      Eigen::MatrixXd* nxt = &ch.ubar[1];
+      MatrixB* cur = &ch.ubar[0];
+      MatrixB* nxt = &ch.ubar[1];
       const Eigen::Index sweeps = Eigen::Index(m) * nb;
       int rows = arch_.sizes[L - 1];
       // Cotangent of the last hidden pre-activation: W_{L-1}^T e_k .* g'(a_{L-2}).
@@ -568,7 +596,10 @@ class Mlp {
   // Whether hidden layer l's g' is read off its output instead of stored: ReLU's
   // g' = [g > 0], on a forward pass without the Jacobian chain (which needs the
   // stored g'). Half the memory traffic of a training tape.
-  bool DerivativeFromOutput(const MlpWorkspace::Chunk& ch, int l) const {
+  // Whether Evaluate runs the AVX-512 layer kernel (double only).
+  static constexpr bool kUseLayerKernel = kHaveLayerKernel && std::is_same_v<T, double>;
+
+  bool DerivativeFromOutput(const typename Workspace::Chunk& ch, int l) const {
     return !ch.has_jacobian && arch_.activations[l].kind == ActivationKind::kRelu;
   }
 
@@ -579,9 +610,9 @@ class Mlp {
   static void MultiplyByReluDerivative(ABlock&& abar, const HBlock& h) {
     const Eigen::Index rows = abar.rows();
     for (Eigen::Index c = 0; c < abar.cols(); ++c) {
-      double* __restrict a = abar.col(c).data();
-      const double* __restrict x = h.col(c).data();
-      for (Eigen::Index r = 0; r < rows; ++r) a[r] *= x[r] > 0.0 ? 1.0 : 0.0;
+      B* __restrict a = abar.col(c).data();
+      const B* __restrict x = h.col(c).data();
+      for (Eigen::Index r = 0; r < rows; ++r) a[r] *= x[r] > B(0) ? B(1) : B(0);
     }
   }
 
@@ -591,8 +622,8 @@ class Mlp {
 
   // Forward over one chunk; jac (full-batch matrix) is written at sample offset `begin`.
   template <typename XBlock, typename YBlock>
-  void ForwardChunk(const XBlock& x, YBlock y, Eigen::MatrixXd* jac, int begin,
-                    MlpWorkspace::Chunk* ch) const {
+  void ForwardChunk(const XBlock& x, YBlock y, MatrixB* jac, int begin,
+                    typename Workspace::Chunk* ch) const {
     const int nb = static_cast<int>(x.cols());
     const int L = arch_.num_layers();
     const int n0 = num_inputs();
@@ -641,7 +672,7 @@ class Mlp {
   // layer reported live, outputs transposed back.
   template <typename XBlock, typename YBlock>
   void EvaluateChunk([[maybe_unused]] const XBlock& x, [[maybe_unused]] YBlock& y,
-                     [[maybe_unused]] MlpWorkspace::Chunk* ch) const {
+                     [[maybe_unused]] typename Workspace::Chunk* ch) const {
 #if DIFFDYN_LAYER_KERNEL
     constexpr int kB = kLayerBlock;
     const int nb = static_cast<int>(x.cols());
@@ -688,14 +719,14 @@ class Mlp {
   // faster than the transposed one for these shapes (6 x 100 times 6 x 250).
   template <typename ABlock, typename OutBlock>
   void GemmTransposedWeight(int l, const ABlock& abar, OutBlock&& out,
-                            MlpWorkspace::Chunk* buf) const {
+                            typename Workspace::Chunk* buf) const {
     const int rows = arch_.sizes[l + 1];
     const int cols = arch_.sizes[l];
-    if (std::min(rows, cols) > MlpWorkspace::kThinSide) {
+    if (std::min(rows, cols) > Workspace::kThinSide) {
       Gemm(1.0, W(l), true, abar, false, 0.0, out);
       return;
     }
-    Eigen::Map<Eigen::MatrixXd> wt(buf->weight_t.data(), cols, rows);
+    Eigen::Map<MatrixB> wt(buf->weight_t.data(), cols, rows);
     wt = W(l).transpose();
     Gemm(1.0, wt, false, abar, false, 0.0, out);
   }
@@ -704,9 +735,9 @@ class Mlp {
   // Backward / BackwardAccumulate: grad (num_parameters() entries, or null) is
   // overwritten, or added to if `accumulate`.
   template <typename GyMatrix>
-  void BackwardImpl(const GyMatrix& gy, const Eigen::MatrixXd& gjac, double* grad, bool accumulate,
-                    Eigen::MatrixXd* grad_inputs, MlpWorkspace* ws, int threads,
-                    MlpWorkspace* scratch = nullptr) const {
+  void BackwardImpl(const GyMatrix& gy, const MatrixB& gjac, B* grad, bool accumulate,
+                    MatrixB* grad_inputs, Workspace* ws, int threads,
+                    Workspace* scratch = nullptr) const {
     DIFFDYN_CHECK(ws != nullptr, "Mlp::Backward needs a workspace");
     DIFFDYN_CHECK(ws->batch_ >= 0, "Mlp::Backward needs a Forward on this workspace; its last ",
                   "pass was Evaluate, which keeps no tape");
@@ -737,13 +768,13 @@ class Mlp {
       scratch->Reserve(arch_, chunks * scratch->chunk_size(), false);
     }
     ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
-      MlpWorkspace::Chunk& buf = scratch->chunks_[c];
+      typename Workspace::Chunk& buf = scratch->chunks_[c];
       BackwardChunk(has_gy ? &gy : nullptr, has_gj ? &gjac : nullptr, begin, end - begin,
                     grad != nullptr, direct && grad ? grad : buf.grad.data(), direct && accumulate,
                     grad_inputs, &ws->chunks_[c], &buf);
     });
     if (grad == nullptr) return;
-    Eigen::Map<Eigen::VectorXd> g(grad, p);
+    Eigen::Map<VectorB> g(grad, p);
     if (!accumulate && (batch == 0 || !direct)) g.setZero();
     // Chunk gradients summed in chunk order: identical at any thread count.
     if (!direct) {
@@ -754,10 +785,10 @@ class Mlp {
   // Parameter gradients go to grad_out (num_parameters()), added if `accumulate`.
   // ch holds the forward pass; buf the cotangents abar (may be ch).
   template <typename GyMatrix>
-  void BackwardChunk(const GyMatrix* gy, const Eigen::MatrixXd* gjac, int begin, int nb,
-                     bool want_params, double* grad_out, bool accumulate,
-                     Eigen::MatrixXd* grad_inputs, MlpWorkspace::Chunk* ch,
-                     MlpWorkspace::Chunk* buf) const {
+  void BackwardChunk(const GyMatrix* gy, const MatrixB* gjac, int begin, int nb,
+                     bool want_params, B* grad_out, bool accumulate,
+                     MatrixB* grad_inputs, typename Workspace::Chunk* ch,
+                     typename Workspace::Chunk* buf) const {
     const int L = arch_.num_layers();
     const int n0 = num_inputs();
     const Eigen::Index nz = Eigen::Index(n0) * nb;
@@ -794,8 +825,8 @@ class Mlp {
       // Parameter gradients of layer l: dW += abar h_l^T, db += abar 1.
       auto parameter_gradient = [&] {
         if (!want_params) return;
-        Eigen::Map<Eigen::MatrixXd> gw(grad_out + arch_.WeightOffset(l), rows, cols);
-        Eigen::Map<Eigen::VectorXd> gb(grad_out + arch_.BiasOffset(l), rows);
+        Eigen::Map<MatrixB> gw(grad_out + arch_.WeightOffset(l), rows, cols);
+        Eigen::Map<VectorB> gb(grad_out + arch_.BiasOffset(l), rows);
         if (!accumulate) {
           gw.setZero();
           gb.setZero();
