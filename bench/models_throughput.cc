@@ -1,9 +1,10 @@
-// Forward + backward of a batch of 500 through a 6-100-100-6 network, double,
-// with softplus (the DDN's activation; second argument 0) and with ReLU (the
-// NeuralODE-Panda models' activation; 1), as achieved GFLOP/s against the peak measured in the same run: the
-// best two-thread double-precision matrix product at 2048^3 (Eigen split over
-// two threads, and OpenBLAS's cblas_dgemm on two threads when libopenblas is
-// present, loaded at run time).
+// Forward + backward of a batch of 500 through a 6-100-100-6 network, in double
+// and in float, with softplus (the DDN's activation; argument relu:0) and with ReLU
+// (the NeuralODE-Panda models' activation; relu:1), as achieved GFLOP/s against the
+// peak of the same precision measured in the same run: the best two-thread matrix
+// product at 2048^3 (Eigen split over two threads, and OpenBLAS's cblas_dgemm or
+// cblas_sgemm on two threads when libopenblas is present, loaded at run time).
+// bench/models_throughput_torch.py times the same work in PyTorch.
 //
 //   build/bench/bench_models_throughput      (prints "fraction of peak" at the end)
 //
@@ -27,10 +28,12 @@ namespace {
 
 constexpr int kBatch = 500;
 
-Eigen::MatrixXd RandomMatrix(int rows, int cols, std::uint64_t seed) {
+template <typename S>
+Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic> RandomMatrix(int rows, int cols,
+                                                              std::uint64_t seed) {
   Rng rng(seed);
-  Eigen::MatrixXd m(rows, cols);
-  for (Eigen::Index i = 0; i < m.size(); ++i) m.data()[i] = StandardNormal(rng);
+  Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic> m(rows, cols);
+  for (Eigen::Index i = 0; i < m.size(); ++i) m.data()[i] = static_cast<S>(StandardNormal(rng));
   return m;
 }
 
@@ -40,38 +43,52 @@ double ForwardBackwardFlops(const MlpArchitecture& arch, int batch) {
   return 3.0 * flops;
 }
 
+// Arguments: threads, relu (0: softplus, 1: ReLU).
+template <typename S>
 void BM_ForwardBackward(benchmark::State& state) {
+  using Matrix = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
   const int threads = static_cast<int>(state.range(0));
   const Activation g = state.range(1) == 0 ? Activation::Softplus() : Activation::Relu();
   const MlpArchitecture arch{{6, 100, 100, 6}, {g, g}};
-  const Mlp<double> net = MakeInitializedMlp(arch, InitOptions{}, 1);
-  const Eigen::MatrixXd x = RandomMatrix(6, kBatch, 2);
-  const Eigen::MatrixXd gy = RandomMatrix(6, kBatch, 3);
-  MlpWorkspace ws(arch, kBatch, (kBatch + threads - 1) / threads, false);
-  Eigen::MatrixXd y, gx;
-  Eigen::VectorXd grad(net.num_parameters());
+  const Mlp<S> net = MakeInitializedMlp(arch, InitOptions{}, 1).template cast<S>();
+  const Matrix x = RandomMatrix<S>(6, kBatch, 2);
+  const Matrix gy = RandomMatrix<S>(6, kBatch, 3);
+  BasicMlpWorkspace<S> ws(arch, kBatch, (kBatch + threads - 1) / threads, false);
+  Matrix y, gx;
+  Eigen::Matrix<S, Eigen::Dynamic, 1> grad(net.num_parameters());
   for (auto _ : state) {
     net.Forward(x, &y, nullptr, &ws, threads);
-    net.Backward(gy, Eigen::MatrixXd(), &grad, &gx, &ws, threads);
+    net.Backward(gy, Matrix(), &grad, &gx, &ws, threads);
     benchmark::DoNotOptimize(grad.data());
   }
   state.counters["GFLOP/s"] = benchmark::Counter(ForwardBackwardFlops(arch, kBatch) * 1e-9,
                                                  benchmark::Counter::kIsIterationInvariantRate);
 }
-BENCHMARK(BM_ForwardBackward)
+BENCHMARK(BM_ForwardBackward<double>)
+    ->ArgsProduct({{1, 2}, {0, 1}})
+    ->ArgNames({"threads", "relu"})
+    ->UseRealTime()
+    ->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_ForwardBackward<float>)
     ->ArgsProduct({{1, 2}, {0, 1}})
     ->ArgNames({"threads", "relu"})
     ->UseRealTime()
     ->Unit(benchmark::kMicrosecond);
 
-// The peak candidates (peak_dgemm.h): Eigen and OpenBLAS, C = A B at 2048^3 on two threads.
-void BM_PeakDgemmEigenTwoThreads(benchmark::State& state) { bench::PeakDgemm2Threads(state); }
-BENCHMARK(BM_PeakDgemmEigenTwoThreads)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
-
-void BM_PeakDgemmOpenBlasTwoThreads(benchmark::State& state) {
-  bench::PeakDgemmOpenBlas2Threads(state);
+// The peak candidates (peak_dgemm.h): Eigen and OpenBLAS, C = A B at 2048^3 on two
+// threads, per precision.
+template <typename S>
+void BM_PeakGemmEigenTwoThreads(benchmark::State& state) {
+  bench::PeakGemm2Threads<S>(state);
 }
-BENCHMARK(BM_PeakDgemmOpenBlasTwoThreads)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
+template <typename S>
+void BM_PeakGemmOpenBlasTwoThreads(benchmark::State& state) {
+  bench::PeakGemmOpenBlas2Threads<S>(state);
+}
+BENCHMARK(BM_PeakGemmEigenTwoThreads<double>)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
+BENCHMARK(BM_PeakGemmOpenBlasTwoThreads<double>)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
+BENCHMARK(BM_PeakGemmEigenTwoThreads<float>)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
+BENCHMARK(BM_PeakGemmOpenBlasTwoThreads<float>)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 // Console output plus a record of every GFLOP/s counter.
 class RecordingReporter : public benchmark::ConsoleReporter {
@@ -95,21 +112,27 @@ int main(int argc, char** argv) {
   diffdyn::RecordingReporter reporter;
   benchmark::RunSpecifiedBenchmarks(&reporter);
   benchmark::Shutdown();
-  double peak = 0.0;
-  std::string peak_name;
-  std::map<std::string, std::pair<double, std::string>> best;  // per activation
-  for (const auto& [name, value] : reporter.gflops) {
-    if (name.find("PeakDgemm") != std::string::npos && value > peak) peak = value, peak_name = name;
-    if (name.find("ForwardBackward") != std::string::npos) {
-      const std::string act = name.find("relu:1") != std::string::npos ? "relu" : "softplus";
-      if (value > best[act].first) best[act] = {value, name};
+  // Per precision: the peak and each activation's best forward+backward.
+  for (const std::string precision : {"double", "float"}) {
+    const std::string tag = "<" + precision + ">";
+    double peak = 0.0;
+    std::string peak_name;
+    std::map<std::string, std::pair<double, std::string>> best;  // per activation
+    for (const auto& [name, value] : reporter.gflops) {
+      if (name.find(tag) == std::string::npos) continue;
+      if (name.find("PeakGemm") != std::string::npos && value > peak) peak = value, peak_name = name;
+      if (name.find("ForwardBackward") != std::string::npos) {
+        const std::string act = name.find("relu:1") != std::string::npos ? "relu" : "softplus";
+        if (value > best[act].first) best[act] = {value, name};
+      }
     }
-  }
-  if (peak > 0.0) {
-    std::printf("peak (best two-thread dgemm 2048^3): %.1f GFLOP/s (%s)\n", peak, peak_name.c_str());
+    if (peak <= 0.0) continue;
+    std::printf("%s peak (best two-thread gemm 2048^3): %.1f GFLOP/s (%s)\n", precision.c_str(),
+                peak, peak_name.c_str());
     for (const auto& [act, run] : best) {
-      std::printf("forward+backward best, %s: %.1f GFLOP/s (%s) = %.0f%% of peak\n", act.c_str(),
-                  run.first, run.second.c_str(), 100.0 * run.first / peak);
+      std::printf("%s forward+backward best, %s: %.1f GFLOP/s (%s) = %.0f%% of peak\n",
+                  precision.c_str(), act.c_str(), run.first, run.second.c_str(),
+                  100.0 * run.first / peak);
     }
   }
   return 0;

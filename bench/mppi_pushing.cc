@@ -114,11 +114,11 @@ BENCHMARK(BM_MppiChunks)
     ->Args({20, 2, 125})->Args({20, 2, 500})
     ->UseRealTime()->MeasureProcessCPUTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
-void BM_PeakDgemm2Threads(benchmark::State& state) { bench::PeakDgemm2Threads(state); }
+void BM_PeakDgemm2Threads(benchmark::State& state) { bench::PeakGemm2Threads<double>(state); }
 BENCHMARK(BM_PeakDgemm2Threads)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 void BM_PeakDgemmOpenBlas2Threads(benchmark::State& state) {
-  bench::PeakDgemmOpenBlas2Threads(state);
+  bench::PeakGemmOpenBlas2Threads<double>(state);
 }
 BENCHMARK(BM_PeakDgemmOpenBlas2Threads)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 

@@ -104,7 +104,7 @@ BENCHMARK(BM_EpochAbsNodeDopri5)
     ->MinTime(2.0);
 
 // The peak: C = A B at 2048^3 on two threads, Eigen and OpenBLAS (peak_dgemm.h).
-void BM_PeakDgemm2Threads(benchmark::State& state) { bench::PeakDgemm2Threads(state); }
+void BM_PeakDgemm2Threads(benchmark::State& state) { bench::PeakGemm2Threads<double>(state); }
 BENCHMARK(BM_PeakDgemm2Threads)
     ->MeasureProcessCPUTime()
     ->UseRealTime()
@@ -112,7 +112,7 @@ BENCHMARK(BM_PeakDgemm2Threads)
     ->MinTime(2.0);
 
 void BM_PeakDgemmOpenBlas2Threads(benchmark::State& state) {
-  bench::PeakDgemmOpenBlas2Threads(state);
+  bench::PeakGemmOpenBlas2Threads<double>(state);
 }
 BENCHMARK(BM_PeakDgemmOpenBlas2Threads)
     ->MeasureProcessCPUTime()
