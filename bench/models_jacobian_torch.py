@@ -1,29 +1,32 @@
 #!/usr/bin/env python3
 """PyTorch reference for bench/models_jacobian.cc.
 
-1000 input Jacobians (3 x 6) of a 6-100-100-3 softplus network in float64,
-single-threaded: autograd (3 backward passes), functorch vmap(jacrev),
-vmap(jacfwd), and the DDN-style closed-form forward chain written in torch.
-Prints the BLAS torch uses and, if the C++ results of the same run are next to
---out (models_jacobian.json), the ratio of our best to PyTorch's best.
+1000 input Jacobians (3 x 6) of a 6-100-100-3 softplus network in float64 and
+float32: autograd (3 backward passes), functorch vmap(jacrev), vmap(jacfwd),
+and the DDN-style closed-form forward chain written in torch; in both two-core
+configurations (torch 2 threads with OpenBLAS 1, torch 1 with OpenBLAS 2), each
+in its own process, keeping the faster per method. Prints the BLAS torch uses
+and, if the C++ results of the same run are next to --out (models_jacobian.json),
+the ratio of our best (any thread count) to PyTorch's best, per precision.
 
-    OPENBLAS_NUM_THREADS=1 /usr/bin/python3 bench/models_jacobian_torch.py --out r.json
+    /usr/bin/python3 bench/models_jacobian_torch.py --out r.json
 """
 import argparse
 import json
 import os
+import sys
 
 import torch
 
-from torch_common import blas_in_use, time_it
+from torch_common import describe_torch, fastest_two_core, ours_best, time_it
 
 BATCH = 1000
 
 
-def make_net():
+def make_net(dtype):
     torch.manual_seed(1)
     layers = [torch.nn.Linear(6, 100), torch.nn.Linear(100, 100), torch.nn.Linear(100, 3)]
-    return [(l.weight.detach().double(), l.bias.detach().double()) for l in layers]
+    return [(l.weight.detach().to(dtype), l.bias.detach().to(dtype)) for l in layers]
 
 
 def forward(params, x):
@@ -58,62 +61,67 @@ def closed_form_chain(params, x):
     return jac
 
 
+def measure(torch_threads):
+    """Median wall seconds of each method per precision, keyed 'precision/method'."""
+    describe_torch(torch_threads)
+    results = {}
+    for dtype, precision in ((torch.float64, "double"), (torch.float32, "float")):
+        params = make_net(dtype)
+        gen = torch.Generator().manual_seed(2)
+        x = torch.randn(BATCH, 6, generator=gen, dtype=torch.float64).to(dtype)
+        methods = {"autograd_3_backward": lambda: autograd_jacobian(params, x),
+                   "closed_form_chain": lambda: closed_form_chain(params, x)}
+        try:
+            import functorch
+            f1 = lambda v: forward(params, v.unsqueeze(0)).squeeze(0)
+            jr = functorch.vmap(functorch.jacrev(f1))
+            jf = functorch.vmap(functorch.jacfwd(f1))
+            methods["functorch_vmap_jacrev"] = lambda: jr(x)
+            methods["functorch_vmap_jacfwd"] = lambda: jf(x)
+        except Exception as e:  # functorch missing or failing: say so, keep going
+            print("functorch unavailable:", e, file=sys.stderr)
+        reference = autograd_jacobian(params, x)
+        for name, fn in methods.items():
+            err = (fn() - reference).abs().max().item()
+            assert err < (1e-10 if dtype == torch.float64 else 1e-4), (precision, name, err)
+            results[f"{precision}/{name}"], _ = time_it(fn)
+    return results
+
+
+def precision_of(name):
+    """'double' or 'float' for our batched benchmarks (BM_...<S>/...), else None."""
+    return name[name.index("<") + 1:name.index(">")] if "<" in name else None
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--out", default="")
+    parser.add_argument("--torch-threads", type=int, default=0,
+                        help="internal: measure one configuration and print JSON")
     args = parser.parse_args()
-    torch.set_num_threads(1)
-    print("torch", torch.__version__, "threads", torch.get_num_threads(),
-          "OPENBLAS_NUM_THREADS", os.environ.get("OPENBLAS_NUM_THREADS"))
-    print("BLAS libraries mapped:", ", ".join(blas_in_use()) or "none found")
-    params = make_net()
-    gen = torch.Generator().manual_seed(2)
-    x = torch.randn(BATCH, 6, generator=gen, dtype=torch.float64)
-
-    methods = {"autograd_3_backward": lambda: autograd_jacobian(params, x),
-               "closed_form_chain": lambda: closed_form_chain(params, x)}
-    try:
-        import functorch
-        f1 = lambda v: forward(params, v.unsqueeze(0)).squeeze(0)
-        jr = functorch.vmap(functorch.jacrev(f1))
-        jf = functorch.vmap(functorch.jacfwd(f1))
-        methods["functorch_vmap_jacrev"] = lambda: jr(x)
-        methods["functorch_vmap_jacfwd"] = lambda: jf(x)
-    except Exception as e:  # functorch missing or failing: say so, keep going
-        print("functorch unavailable:", e)
-
-    reference = autograd_jacobian(params, x)
-    results, results_cpu = {}, {}
-    for name, fn in methods.items():
-        err = (fn() - reference).abs().max().item()
-        seconds, cpu = time_it(fn)
-        results[name], results_cpu[name] = seconds, cpu
-        print(f"{name:24s} {seconds * 1e6:10.1f} us wall {cpu * 1e6:10.1f} us CPU   "
-              f"max|J - autograd| = {err:.1e}")
-    best = min(results, key=results.get)
-    best_cpu = min(results_cpu, key=results_cpu.get)
-    print(f"PyTorch best: {best} {results[best] * 1e6:.1f} us wall; "
-          f"{best_cpu} {results_cpu[best_cpu] * 1e6:.1f} us CPU")
-
-    if args.out:
-        with open(args.out, "w") as f:
-            json.dump({"median_seconds": results, "median_cpu_seconds": results_cpu, "best": best}, f,
-                      indent=1)
-        ours_path = os.path.join(os.path.dirname(args.out) or ".", "models_jacobian.json")
-        if os.path.exists(ours_path):
-            with open(ours_path) as f:
-                ours = json.load(f)["benchmarks"]
-            # One thread each (our /2/ runs use two).
-            scale = {"ms": 1e-3, "us": 1e-6, "ns": 1e-9, "s": 1.0}
-            single = [b for b in ours if "/2/" not in b["name"] and b.get("run_type") != "aggregate"]
-            wall = {b["name"]: b["real_time"] * scale[b["time_unit"]] for b in single}
-            cpu = {b["name"]: b["cpu_time"] * scale[b["time_unit"]] for b in single}
-            our_best = min(wall, key=wall.get)
-            our_best_cpu = min(cpu, key=cpu.get)
-            print(f"ours best (1 thread): {our_best} {wall[our_best] * 1e6:.1f} us wall; "
-                  f"speed-up over PyTorch best: {results[best] / wall[our_best]:.2f}x wall")
-            print(f"ours best CPU (1 thread): {our_best_cpu} {cpu[our_best_cpu] * 1e6:.1f} us CPU; "
-                  f"speed-up over PyTorch best: {results_cpu[best_cpu] / cpu[our_best_cpu]:.2f}x CPU")
+    if args.torch_threads:
+        print(json.dumps(measure(args.torch_threads)))
+        return
+    by_config, best = fastest_two_core(__file__)
+    torch_best = {}
+    for key, entry in best.items():
+        precision = key.split("/")[0]
+        if precision not in torch_best or entry["seconds"] < torch_best[precision][0]:
+            torch_best[precision] = (entry["seconds"], key, entry["config"])
+    for precision, (seconds, key, config) in torch_best.items():
+        print(f"PyTorch best, {precision}: {key} {seconds * 1e6:.1f} us ({config})")
+    if not args.out:
+        return
+    ours_path = os.path.join(os.path.dirname(args.out) or ".", "models_jacobian.json")
+    ours = ours_best(ours_path, precision_of) if os.path.exists(ours_path) else {}
+    for precision, (seconds, name) in sorted(ours.items()):
+        if precision in torch_best:
+            print(f"ours best, {precision}: {name} {seconds * 1e6:.1f} us; ours / PyTorch best = "
+                  f"{seconds / torch_best[precision][0]:.2f}x")
+    with open(args.out, "w") as f:
+        json.dump({"by_config": by_config, "best": best,
+                   "ours_over_torch": {p: ours[p][0] / torch_best[p][0]
+                                       for p in ours if p in torch_best}}, f, indent=1)
 
 
 if __name__ == "__main__":

@@ -15,21 +15,17 @@ time and the ratio ours / PyTorch (below 1: we are faster).
 import argparse
 import json
 import os
-import subprocess
-import sys
+
+import torch
+
+from torch_common import describe_torch, fastest_two_core, ours_best, time_it
 
 BATCH = 500
-CONFIGS = {"torch2_blas1": (2, 1), "torch1_blas2": (1, 2)}
 
 
 def measure(torch_threads):
     """Median wall seconds per forward+backward for each (precision, activation)."""
-    import torch
-    from torch_common import blas_in_use, time_it
-    torch.set_num_threads(torch_threads)
-    print(f"  torch {torch.__version__} threads {torch.get_num_threads()} OPENBLAS_NUM_THREADS "
-          f"{os.environ.get('OPENBLAS_NUM_THREADS')}; BLAS: {', '.join(blas_in_use()) or 'none found'}",
-          file=sys.stderr)
+    describe_torch(torch_threads)
     results = {}
     for dtype, precision in ((torch.float64, "double"), (torch.float32, "float")):
         for act_name, act in (("softplus", torch.nn.functional.softplus),
@@ -55,23 +51,13 @@ def measure(torch_threads):
     return results
 
 
-def ours_best(path):
-    """Our fastest time (seconds) per 'precision/activation' over thread counts."""
-    with open(path) as f:
-        runs = json.load(f)["benchmarks"]
-    scale = {"ms": 1e-3, "us": 1e-6, "ns": 1e-9, "s": 1.0}
-    best = {}
-    for run in runs:
-        name = run["name"]
-        if not name.startswith("BM_ForwardBackward<") or run.get("run_type") == "aggregate":
-            continue
-        precision = name[len("BM_ForwardBackward<"):name.index(">")]
-        act = "relu" if "relu:1" in name else "softplus"
-        seconds = run["real_time"] * scale[run["time_unit"]]
-        key = f"{precision}/{act}"
-        if key not in best or seconds < best[key][0]:
-            best[key] = (seconds, name)
-    return best
+def workload_of(name):
+    """'precision/activation' of a BM_ForwardBackward<S>/threads:T/relu:R run, else None."""
+    prefix = "BM_ForwardBackward<"
+    if not name.startswith(prefix):
+        return None
+    act = "relu" if "relu:1" in name else "softplus"
+    return f"{name[len(prefix):name.index('>')]}/{act}"
 
 
 def main():
@@ -83,25 +69,12 @@ def main():
     if args.torch_threads:
         print(json.dumps(measure(args.torch_threads)))
         return
-    by_config = {}
-    for name, (torch_threads, blas_threads) in CONFIGS.items():
-        env = dict(os.environ, OPENBLAS_NUM_THREADS=str(blas_threads))
-        done = subprocess.run([sys.executable, __file__, "--torch-threads", str(torch_threads)],
-                              env=env, check=True, capture_output=True, text=True,
-                              cwd=os.path.dirname(os.path.abspath(__file__)))
-        sys.stderr.write(done.stderr)
-        by_config[name] = json.loads(done.stdout)
-    best = {}
-    for key in by_config["torch2_blas1"]:
-        config = min(by_config, key=lambda c: by_config[c][key])
-        best[key] = {"seconds": by_config[config][key], "config": config}
-        print(f"PyTorch {key:16s} " + "  ".join(
-            f"{c} {by_config[c][key] * 1e6:8.1f} us" for c in by_config) + f"  best {config}")
+    by_config, best = fastest_two_core(__file__)
     ours = {}
     if args.out:
         ours_path = os.path.join(os.path.dirname(args.out) or ".", "models_throughput.json")
         if os.path.exists(ours_path):
-            ours = ours_best(ours_path)
+            ours = ours_best(ours_path, workload_of)
         for key, (seconds, name) in sorted(ours.items()):
             if key in best:
                 print(f"ours {key:16s} {seconds * 1e6:8.1f} us ({name}); ours / PyTorch best = "

@@ -1,8 +1,10 @@
 """Helpers shared by the PyTorch reference benchmarks (bench/<name>_torch.py)."""
 
 import csv
+import json
 import math
 import os
+import subprocess
 import sys
 import time
 
@@ -82,3 +84,54 @@ def time_it(fn, repeats=30):
     times.sort()
     cpu.sort()
     return times[len(times) // 2], cpu[len(cpu) // 2]
+
+
+# The two ways to use both cores without oversubscribing them: (torch threads, OpenBLAS threads).
+TWO_CORE_CONFIGS = {"torch2_blas1": (2, 1), "torch1_blas2": (1, 2)}
+
+
+def fastest_two_core(script):
+    """Runs `script --torch-threads N` (which prints a JSON object of median seconds per
+    workload) once per configuration of TWO_CORE_CONFIGS, each in its own process since
+    OpenBLAS reads its thread count at start. Returns (seconds per configuration,
+    {workload: {"seconds", "config"}} of the faster configuration) and prints both."""
+    by_config = {}
+    for name, (torch_threads, blas_threads) in TWO_CORE_CONFIGS.items():
+        env = dict(os.environ, OPENBLAS_NUM_THREADS=str(blas_threads))
+        done = subprocess.run([sys.executable, script, "--torch-threads", str(torch_threads)],
+                              env=env, check=True, capture_output=True, text=True,
+                              cwd=os.path.dirname(os.path.abspath(script)))
+        sys.stderr.write(done.stderr)
+        by_config[name] = json.loads(done.stdout)
+    best = {}
+    for key in next(iter(by_config.values())):
+        config = min(by_config, key=lambda c: by_config[c][key])
+        best[key] = {"seconds": by_config[config][key], "config": config}
+        print(f"PyTorch {key:36s} " + "  ".join(
+            f"{c} {by_config[c][key] * 1e6:8.1f} us" for c in by_config) + f"  best {config}")
+    return by_config, best
+
+
+def describe_torch(torch_threads):
+    """One line on stderr: torch version, its threads, OpenBLAS's and the BLAS mapped."""
+    torch.set_num_threads(torch_threads)
+    print(f"  torch {torch.__version__} threads {torch.get_num_threads()} OPENBLAS_NUM_THREADS "
+          f"{os.environ.get('OPENBLAS_NUM_THREADS')}; BLAS: {', '.join(blas_in_use()) or 'none found'}",
+          file=sys.stderr)
+
+
+def ours_best(path, key_of):
+    """Our fastest wall time per workload in a Google Benchmark JSON file: {key: (seconds,
+    benchmark name)}, where key_of(name) names a run's workload (None skips the run)."""
+    with open(path) as f:
+        runs = json.load(f)["benchmarks"]
+    scale = {"ms": 1e-3, "us": 1e-6, "ns": 1e-9, "s": 1.0}
+    best = {}
+    for run in runs:
+        key = key_of(run["name"])
+        if key is None or run.get("run_type") == "aggregate":
+            continue
+        seconds = run["real_time"] * scale[run["time_unit"]]
+        if key not in best or seconds < best[key][0]:
+            best[key] = (seconds, run["name"])
+    return best
