@@ -11,14 +11,13 @@ the ratio of our best (any thread count) to PyTorch's best, per precision.
 
     /usr/bin/python3 bench/models_jacobian_torch.py --out r.json
 """
-import argparse
 import json
 import os
 import sys
 
 import torch
 
-from torch_common import describe_torch, fastest_two_core, ours_best, time_it
+from torch_common import describe_torch, ours_best, time_it, two_core_reference
 
 BATCH = 1000
 
@@ -94,15 +93,10 @@ def precision_of(name):
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--out", default="")
-    parser.add_argument("--torch-threads", type=int, default=0,
-                        help="internal: measure one configuration and print JSON")
-    args = parser.parse_args()
-    if args.torch_threads:
-        print(json.dumps(measure(args.torch_threads)))
+    run = two_core_reference(__file__, measure)
+    if run is None:
         return
-    by_config, best = fastest_two_core(__file__)
+    args, by_config, best = run
     torch_best = {}
     for key, entry in best.items():
         precision = key.split("/")[0]

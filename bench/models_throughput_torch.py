@@ -12,13 +12,12 @@ time and the ratio ours / PyTorch (below 1: we are faster).
 
     /usr/bin/python3 bench/models_throughput_torch.py --out r.json
 """
-import argparse
 import json
 import os
 
 import torch
 
-from torch_common import describe_torch, fastest_two_core, ours_best, time_it
+from torch_common import describe_torch, ours_best, time_it, two_core_reference
 
 BATCH = 500
 
@@ -61,15 +60,10 @@ def workload_of(name):
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--out", default="")
-    parser.add_argument("--torch-threads", type=int, default=0,
-                        help="internal: measure one configuration and print JSON")
-    args = parser.parse_args()
-    if args.torch_threads:
-        print(json.dumps(measure(args.torch_threads)))
+    run = two_core_reference(__file__, measure)
+    if run is None:
         return
-    by_config, best = fastest_two_core(__file__)
+    args, by_config, best = run
     ours = {}
     if args.out:
         ours_path = os.path.join(os.path.dirname(args.out) or ".", "models_throughput.json")

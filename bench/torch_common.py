@@ -135,3 +135,20 @@ def ours_best(path, key_of):
         if key not in best or seconds < best[key][0]:
             best[key] = (seconds, run["name"])
     return best
+
+
+def two_core_reference(script, measure):
+    """The command line of a two-core PyTorch reference: with --torch-threads N (the
+    internal mode fastest_two_core uses) prints measure(N) as JSON and returns None;
+    otherwise returns (args, by_config, best) of fastest_two_core(script), args.out being
+    the JSON file to write (empty: none)."""
+    import argparse
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--out", default="")
+    parser.add_argument("--torch-threads", type=int, default=0,
+                        help="internal: measure one configuration and print JSON")
+    args = parser.parse_args()
+    if args.torch_threads:
+        print(json.dumps(measure(args.torch_threads)))
+        return None
+    return (args, *fastest_two_core(script))
