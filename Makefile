@@ -17,6 +17,9 @@ STRICT ?= OFF
 CXX_COMPILER ?=
 JOBS ?= $(shell nproc)
 CMAKE_FLAGS ?=
+# A new build directory is generated for Ninja (it keeps both cores busy across
+# targets); one configured earlier keeps its generator.
+GENERATOR = $(if $(wildcard $(BUILD_DIR)/CMakeCache.txt),,-G Ninja)
 # The test programs of the library's folders and the command line (test-asan).
 ASAN_TESTS = autodiff_ode_tests models_tests physics_tests cli_tests
 
@@ -28,7 +31,7 @@ deps:
 	@scripts/install-deps
 
 configure: deps
-	@cmake -S . -B $(BUILD_DIR) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DDIFFDYN_NATIVE=$(NATIVE) \
+	@cmake -S . -B $(BUILD_DIR) $(GENERATOR) -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) -DDIFFDYN_NATIVE=$(NATIVE) \
 	  -DDIFFDYN_STRICT=$(STRICT) $(if $(CXX_COMPILER),-DCMAKE_CXX_COMPILER=$(CXX_COMPILER)) \
 	  $(CMAKE_FLAGS) >/dev/null
 

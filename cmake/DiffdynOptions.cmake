@@ -24,7 +24,15 @@ target_compile_options(diffdyn_project_options INTERFACE
   $<$<BOOL:${DIFFDYN_NATIVE}>:-march=native>
   $<$<BOOL:${DIFFDYN_SANITIZE}>:-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined>
   $<$<BOOL:${DIFFDYN_FUZZ}>:-fsanitize=fuzzer-no-link>)
+# The project's programs link with lld when the compiler accepts it (scripts/install-deps
+# installs it): the test programs link several times faster than with GNU ld.
+option(DIFFDYN_LLD "Link the project's programs with lld when available" ON)
+if(DIFFDYN_LLD)
+  include(CheckLinkerFlag)
+  check_linker_flag(CXX -fuse-ld=lld DIFFDYN_HAVE_LLD)
+endif()
 target_link_options(diffdyn_project_options INTERFACE
+  $<$<BOOL:${DIFFDYN_HAVE_LLD}>:-fuse-ld=lld>
   $<$<BOOL:${DIFFDYN_SANITIZE}>:-fsanitize=address,undefined>)
 
 # diffdyn_use_project_options(target) gives a target the project's options.

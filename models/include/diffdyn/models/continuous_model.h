@@ -165,7 +165,7 @@ class ContinuousTransitionModel final : public TransitionModel {
   Eigen::VectorXd Jacobian(const Eigen::Ref<const Eigen::VectorXd>& x, const Eigen::Ref<const Eigen::VectorXd>& u,
                            Eigen::MatrixXd* jac) const override {
     if constexpr (kJetDynamics) {
-      return JetJacobian([this](const auto& xj, const auto& uj) { return Predict(xj, uj); }, x, u, jac);
+      return JetJacobian([this](const auto& xj, const auto& uj) { return this->Predict(xj, uj); }, x, u, jac);
     } else {
       return TransitionModel::Jacobian(x, u, jac);
     }
