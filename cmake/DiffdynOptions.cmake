@@ -22,8 +22,7 @@ target_compile_options(diffdyn_project_options INTERFACE
   $<$<BOOL:${DIFFDYN_STRICT}>:-Werror>
   $<$<AND:$<BOOL:${DIFFDYN_STRICT}>,${DIFFDYN_GCC12}>:-Wno-error=array-bounds -Wno-error=restrict>
   $<$<BOOL:${DIFFDYN_NATIVE}>:-march=native>
-  $<$<BOOL:${DIFFDYN_SANITIZE}>:-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined>
-  $<$<BOOL:${DIFFDYN_FUZZ}>:-fsanitize=fuzzer-no-link>)
+  $<$<BOOL:${DIFFDYN_SANITIZE}>:-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined>)
 # The project's programs link with lld when the compiler accepts it (scripts/install-deps
 # installs it): the test programs link several times faster than with GNU ld.
 option(DIFFDYN_LLD "Link the project's programs with lld when available" ON)
@@ -35,9 +34,16 @@ target_link_options(diffdyn_project_options INTERFACE
   $<$<BOOL:${DIFFDYN_HAVE_LLD}>:-fuse-ld=lld>
   $<$<BOOL:${DIFFDYN_SANITIZE}>:-fsanitize=address,undefined>)
 
-# diffdyn_use_project_options(target) gives a target the project's options.
+# diffdyn_use_project_options(target) gives a target the project's options. With
+# DIFFDYN_FUZZ the compiled libraries (the code the fuzz targets reach, header-only
+# parts included as they are instantiated there) carry libFuzzer's coverage
+# instrumentation; test programs and tools do without it.
 function(diffdyn_use_project_options target)
   target_link_libraries(${target} PRIVATE $<BUILD_INTERFACE:diffdyn_project_options>)
+  get_target_property(type ${target} TYPE)
+  if(DIFFDYN_FUZZ AND type STREQUAL "STATIC_LIBRARY")
+    target_compile_options(${target} PRIVATE -fsanitize=fuzzer-no-link)
+  endif()
 endfunction()
 
 # diffdyn_precompile_headers(target [more headers]) precompiles the third-party
