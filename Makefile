@@ -2,6 +2,8 @@
 #   make demo        install missing dependencies, build, run the main job
 #   make test        install missing dependencies, build, run every test
 #   make test-quick  the same with the tests labelled `quick` only
+#   make test-portable  clang++ at -O1, x86-64 baseline ISA (build-clang/), the quick
+#                    tests (CI's portable stage)
 #   make test-asan   clang++ ASan + UBSan build (preset debug-asan, build-asan/), the
 #                    tests of autodiff_ode, models, physics and cli
 #   make fuzz-quick  the same build, each libFuzzer target for 12 s (fuzz/README.md)
@@ -23,7 +25,7 @@ GENERATOR = $(if $(wildcard $(BUILD_DIR)/CMakeCache.txt),,-G Ninja)
 # The test programs of the library's folders and the command line (test-asan).
 ASAN_TESTS = autodiff_ode_tests models_tests physics_tests cli_tests
 
-.PHONY: all deps configure build test test-quick test-asan fuzz-quick demo bench clean
+.PHONY: all deps configure build test test-quick test-portable test-asan fuzz-quick demo bench clean
 
 all: build
 
@@ -43,6 +45,10 @@ test: build
 
 test-quick: build
 	@cd $(BUILD_DIR) && ctest -j $(JOBS) --output-on-failure --timeout 900 -L quick
+
+test-portable:
+	@$(MAKE) --no-print-directory test-quick BUILD_DIR=build-clang NATIVE=OFF CXX_COMPILER=clang++ \
+	  CMAKE_FLAGS="-DDIFFDYN_BUILD_BENCH=OFF -DCMAKE_CXX_FLAGS_RELEASE='-O1 -DNDEBUG' $(CMAKE_FLAGS)"
 
 test-asan:
 	@scripts/install-deps --ci

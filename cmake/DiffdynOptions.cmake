@@ -31,7 +31,7 @@ if(DIFFDYN_LLD)
   check_linker_flag(CXX -fuse-ld=lld DIFFDYN_HAVE_LLD)
 endif()
 target_link_options(diffdyn_project_options INTERFACE
-  $<$<BOOL:${DIFFDYN_HAVE_LLD}>:-fuse-ld=lld>
+  $<$<AND:$<BOOL:${DIFFDYN_LLD}>,$<BOOL:${DIFFDYN_HAVE_LLD}>>:-fuse-ld=lld>
   $<$<BOOL:${DIFFDYN_SANITIZE}>:-fsanitize=address,undefined>)
 
 # diffdyn_use_project_options(target) gives a target the project's options. With
