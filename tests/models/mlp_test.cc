@@ -38,7 +38,7 @@ Mlp<double> SmallNet(const Activation& act, std::uint64_t seed) {
   return Mlp<double>(arch, RandomVector(arch.num_parameters(), 0.6, rng));
 }
 
-std::vector<Activation> AllActivations() {
+std::vector<Activation> EveryActivation() {
   return {Activation::Relu(), Activation::Softplus(), Activation::Softplus(2.5),
           Activation::Tanh(), Activation::Sigmoid(),  Activation::Elu(0.8),
           Activation::Cos(),  Activation::Linear()};
@@ -71,7 +71,7 @@ Eigen::MatrixXd JetJacobian(const Mlp<double>& net, const Eigen::VectorXd& x) {
 
 TEST(Mlp, ClosedFormJacobianMatchesJetsAndCentralDifferences) {
   Rng rng(7);
-  for (const Activation& act : AllActivations()) {
+  for (const Activation& act : EveryActivation()) {
     const Mlp<double> net = SmallNet(act, 11);
     int checked = 0;
     for (int trial = 0; checked < 5 && trial < 50; ++trial) {
@@ -99,7 +99,7 @@ TEST(Mlp, ClosedFormJacobianMatchesJetsAndCentralDifferences) {
 TEST(Mlp, ClosedFormHessianMatchesJetOfJacobianAndCentralDifferences) {
   using Jet3 = ceres::Jet<double, 3>;
   Rng rng(8);
-  for (const Activation& act : AllActivations()) {
+  for (const Activation& act : EveryActivation()) {
     if (act.kind == ActivationKind::kRelu) continue;  // Hessian is 0; checked below
     const Mlp<double> net = SmallNet(act, 12);
     const Eigen::VectorXd x = RandomVector(3, 1.0, rng);
@@ -138,7 +138,7 @@ TEST(Mlp, ClosedFormHessianMatchesJetOfJacobianAndCentralDifferences) {
 
 TEST(Mlp, BatchedForwardMatchesSingleSample) {
   Rng rng(9);
-  for (const Activation& act : AllActivations()) {
+  for (const Activation& act : EveryActivation()) {
     const Mlp<double> net = SmallNet(act, 13);
     const int batch = 37;
     const Eigen::MatrixXd X = RandomMatrix(3, batch, 1.0, rng);
@@ -167,7 +167,7 @@ TEST(Mlp, EvaluateMatchesForwardAndSingleSample) {
   Rng rng(19);
   const std::vector<std::vector<int>> shapes = {
       {6, 100, 100, 6}, {3, 6, 5, 2}, {6, 7, 13, 3}, {1, 9, 1}, {4, 33, 4}};
-  for (const Activation& act : AllActivations()) {
+  for (const Activation& act : EveryActivation()) {
     for (const std::vector<int>& sizes : shapes) {
       MlpArchitecture arch{sizes, std::vector<Activation>(sizes.size() - 2, act)};
       const Mlp<double> net(arch, RandomVector(arch.num_parameters(), 0.4, rng));
@@ -343,7 +343,7 @@ ReverseAndJets ReverseAndJetGradients(const Mlp<double>& net, const Eigen::Matri
 
 void CheckReverseMode(bool jacobian_loss) {
   Rng rng(jacobian_loss ? 21 : 20);
-  for (const Activation& act : AllActivations()) {
+  for (const Activation& act : EveryActivation()) {
     const Mlp<double> net = SmallNet(act, 14);
     const int batch = 9;
     const Eigen::MatrixXd X = RandomMatrix(3, batch, 1.0, rng);

@@ -29,7 +29,7 @@ Mlp<double> Net() {
                             InitOptions{}, 7);
 }
 
-std::string ReadAll(const fs::path& p) {
+std::string ReadModelText(const fs::path& p) {
   std::ifstream in(p);
   return {std::istreambuf_iterator<char>(in), {}};
 }
@@ -59,7 +59,7 @@ TEST(ModelFile, RoundTripIsBitExact) {
   EXPECT_TRUE(back.parameters() == net.parameters());
   EXPECT_EQ(contents.provenance["seed"], 7);
   EXPECT_EQ(contents.metrics["val_loss"], 0.125);
-  const nlohmann::json j = nlohmann::json::parse(ReadAll(path));
+  const nlohmann::json j = nlohmann::json::parse(ReadModelText(path));
   EXPECT_EQ(j["format"], "diffdyn-model");
   EXPECT_EQ(j["version"], kModelFileVersion);
   EXPECT_EQ(j["kind"], "mlp");
@@ -70,7 +70,7 @@ TEST(ModelFile, RoundTripIsBitExact) {
 TEST(ModelFile, RejectsTruncatedFiles) {
   const fs::path good = TempDir() / "good.json";
   SaveMlp(good, Net());
-  const std::string text = ReadAll(good);
+  const std::string text = ReadModelText(good);
   for (double fraction : {0.0, 0.3, 0.9}) {
     const fs::path bad = TempDir() / "truncated.json";
     WriteAll(bad, text.substr(0, static_cast<std::size_t>(fraction * text.size())));
@@ -83,7 +83,7 @@ TEST(ModelFile, RejectsTruncatedFiles) {
 fs::path Modified(const std::string& name, const std::function<void(nlohmann::json&)>& edit) {
   const fs::path good = TempDir() / "good2.json";
   SaveMlp(good, Net());
-  nlohmann::json j = nlohmann::json::parse(ReadAll(good));
+  nlohmann::json j = nlohmann::json::parse(ReadModelText(good));
   edit(j);
   const fs::path path = TempDir() / name;
   WriteAll(path, j.dump());
@@ -127,7 +127,7 @@ TEST(ModelFile, RejectsNonFiniteParameters) {
   // A literal too large for a double.
   const fs::path good = TempDir() / "good3.json";
   SaveMlp(good, Net());
-  std::string text = ReadAll(good);
+  std::string text = ReadModelText(good);
   const std::size_t at = text.find("\"values\"");
   const std::size_t first = text.find_first_of("-0123456789", at);
   const std::size_t end = text.find_first_of(",\n]", first);
@@ -138,9 +138,9 @@ TEST(ModelFile, RejectsNonFiniteParameters) {
   // Saving a non-finite model is refused and leaves the old file intact.
   Mlp<double> nan_net = Net();
   nan_net.mutable_parameters()[1] = std::nan("");
-  const std::string before = ReadAll(good);
+  const std::string before = ReadModelText(good);
   EXPECT_THROW(SaveMlp(good, nan_net), Error);
-  EXPECT_EQ(ReadAll(good), before);
+  EXPECT_EQ(ReadModelText(good), before);
 }
 
 TEST(ModelFile, OtherKindsRegisterThroughTheSameLoader) {
