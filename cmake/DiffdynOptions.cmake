@@ -38,9 +38,21 @@ target_link_options(diffdyn_project_options INTERFACE
 # DIFFDYN_FUZZ the compiled libraries (the code the fuzz targets reach, header-only
 # parts included as they are instantiated there) carry libFuzzer's coverage
 # instrumentation; test programs and tools do without it.
+#
+# With DIFFDYN_UNITY_BUILD (default ON) a multi-file target compiles its sources in
+# batches of 8, one translation unit per batch: the shared templates (Eigen
+# products, Jets, the models' engines) are instantiated and optimised once per
+# batch instead of once per file. Names in a file's anonymous namespace must
+# therefore be unique within its target. Developers editing one file at a time
+# configure with -DDIFFDYN_UNITY_BUILD=OFF.
 function(diffdyn_use_project_options target)
   target_link_libraries(${target} PRIVATE $<BUILD_INTERFACE:diffdyn_project_options>)
   get_target_property(type ${target} TYPE)
+  get_target_property(sources ${target} SOURCES)
+  list(LENGTH sources source_count)
+  if(DIFFDYN_UNITY_BUILD AND source_count GREATER 1)
+    set_target_properties(${target} PROPERTIES UNITY_BUILD ON UNITY_BUILD_BATCH_SIZE 8)
+  endif()
   if(DIFFDYN_FUZZ AND type STREQUAL "STATIC_LIBRARY")
     target_compile_options(${target} PRIVATE -fsanitize=fuzzer-no-link)
   endif()

@@ -357,7 +357,7 @@ TEST(Adjoint, SizeErrorsNameSizes) {
 }
 
 // dz/dt = (0, z_1^2, 0) per sample: entry 1 of a sample with z_1(0) = 2 blows up at t = 0.5.
-struct BlowUp {
+struct BatchedBlowUp {
   struct Workspace {};
   int state_size() const { return 3; }
   int num_params() const { return 0; }
@@ -381,8 +381,8 @@ TEST(Adjoint, NonFiniteStateNamesTimeEntryAndSample) {
   for (Method m : {Method::kRk4, Method::kDopri5}) {
     OdeOptions options;
     options.method = m;
-    const BlowUp system;
-    BatchedOdeSolver<BlowUp> solver(system, options);
+    const BatchedBlowUp system;
+    BatchedOdeSolver<BatchedBlowUp> solver(system, options);
     std::vector<Eigen::MatrixXd> outputs;
     try {
       solver.Forward(z0, {0.0, 1.0}, &outputs);

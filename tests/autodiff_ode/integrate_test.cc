@@ -165,8 +165,8 @@ TEST(Integrate, BackwardInTime) {
 // Typed over double and Jets: same values; Jets carry dx(t)/dx0 = [[cos, sin], [-sin, cos]].
 template <typename T>
 class IntegrateScalars : public ::testing::Test {};
-using Scalars = ::testing::Types<double, ceres::Jet<double, 2>, ceres::Jet<double, 5>>;
-TYPED_TEST_SUITE(IntegrateScalars, Scalars);
+using IntegrateScalarTypes = ::testing::Types<double, ceres::Jet<double, 2>, ceres::Jet<double, 5>>;
+TYPED_TEST_SUITE(IntegrateScalars, IntegrateScalarTypes);
 
 TYPED_TEST(IntegrateScalars, HarmonicOscillatorValuesAndSensitivities) {
   using T = TypeParam;

@@ -101,8 +101,8 @@ TYPED_TEST(JacobianChunks, LargeInputInChunks) {
 // Typed over the scalar: the value part of every Jet evaluation equals the double one.
 template <typename T>
 class JacobianScalars : public ::testing::Test {};
-using Scalars = ::testing::Types<double, ceres::Jet<double, 1>, ceres::Jet<double, 3>>;
-TYPED_TEST_SUITE(JacobianScalars, Scalars);
+using JacobianScalarTypes = ::testing::Types<double, ceres::Jet<double, 1>, ceres::Jet<double, 3>>;
+TYPED_TEST_SUITE(JacobianScalars, JacobianScalarTypes);
 
 TYPED_TEST(JacobianScalars, ValuePartAndDirectionalDerivative) {
   using T = TypeParam;

@@ -20,24 +20,20 @@ namespace {
 
 using testing::CountLines;
 using testing::RunDiffdyn;
+using testing::SummaryJson;
 using testing::TempPath;
 
 const std::string kCharacters = std::string(DIFFDYN_SHARED_DATA_DIR) + "/delan_characters";
 
-nlohmann::json Json(const testing::CommandResult& r) {
-  EXPECT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_EQ(CountLines(r.out), 1) << r.out;
-  return nlohmann::json::parse(r.out);
-}
 
 TEST(DelanCli, TrainThenEvalOnTheCharacters) {
   const std::string model = TempPath("delan_chars.json");
-  const auto t = Json(RunDiffdyn("train --data " + kCharacters +
+  const auto t = SummaryJson(RunDiffdyn("train --data " + kCharacters +
                                  " --model delan --epochs 300 --seed 2 --quiet --json --out " + model));
   EXPECT_EQ(t.at("n_train").get<int>(), 2459);
   EXPECT_EQ(t.at("n_val").get<int>(), 454);
   EXPECT_EQ(t.at("model").get<std::string>(), "delan");
-  const auto e = Json(RunDiffdyn("eval --model " + model + " --data " + kCharacters + " --json"));
+  const auto e = SummaryJson(RunDiffdyn("eval --model " + model + " --data " + kCharacters + " --json"));
   EXPECT_EQ(e.at("n_samples").get<int>(), 454);
   EXPECT_EQ(e.at("model").get<std::string>(), "delan");
   // 300 epochs already explain most of the torque's variance with a positive definite H.
@@ -54,10 +50,10 @@ TEST(DelanCli, TrainThenEvalOnTheCharacters) {
 
 TEST(DelanCli, DataOfAnotherSizeIsOneLineError) {
   const std::string model = TempPath("delan_chars_small.json");
-  Json(RunDiffdyn("train --data " + kCharacters + " --model delan --epochs 1 --hidden 4 --quiet --json --out " +
+  SummaryJson(RunDiffdyn("train --data " + kCharacters + " --model delan --epochs 1 --hidden 4 --quiet --json --out " +
                   model));
   const std::string pendulum = TempPath("delan_pendulum.csv");
-  Json(RunDiffdyn("collect --system pendulum --trajectories 2 --seconds 1 --quiet --json --out " + pendulum));
+  SummaryJson(RunDiffdyn("collect --system pendulum --trajectories 2 --seconds 1 --quiet --json --out " + pendulum));
   const auto r = RunDiffdyn("eval --model " + model + " --data " + pendulum + " --json");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(CountLines(r.err), 1) << r.err;
@@ -82,7 +78,7 @@ TEST(DelanCli, DataWithoutJointsOrTorquesIsRefused) {
 // Without a qdd column the accelerations are estimated (10 Hz smoothing) and training runs.
 TEST(DelanCli, EstimatesAccelerationsWhenTheDataHasNone) {
   const std::string with = TempPath("delan_pend_qdd.csv"), without = TempPath("delan_pend_noqdd.csv");
-  Json(RunDiffdyn("collect --system pendulum --trajectories 6 --seconds 5 --seed 5 --quiet --json --out " + with));
+  SummaryJson(RunDiffdyn("collect --system pendulum --trajectories 6 --seconds 5 --seed 5 --quiet --json --out " + with));
   // Drop the qdd1 column.
   std::ifstream in(with);
   std::ofstream out(without);
@@ -101,7 +97,7 @@ TEST(DelanCli, EstimatesAccelerationsWhenTheDataHasNone) {
   }
   out.close();
   const std::string model = TempPath("delan_pend_noqdd.json");
-  const auto t = Json(RunDiffdyn("train --data " + without + " --model delan --epochs 5 --hidden 8 --seed 1 "
+  const auto t = SummaryJson(RunDiffdyn("train --data " + without + " --model delan --epochs 5 --hidden 8 --seed 1 "
                                  "--quiet --json --out " + model));
   EXPECT_GT(t.at("n_train").get<int>(), 0);
   EXPECT_TRUE(std::isfinite(t.at("final_val_loss").get<double>()));
@@ -112,9 +108,9 @@ TEST(DelanCli, EstimatesAccelerationsWhenTheDataHasNone) {
 // (one actuated joint of two); an unknown --prismatic joint is refused.
 TEST(DelanCli, FrictionModelOnTheCartpoleTrainsEvaluatesAndControls) {
   const std::string data = TempPath("delan_cartpole_all.csv"), model = TempPath("delan_cartpole.json");
-  Json(RunDiffdyn("collect --system cartpole --actuated all --trajectories 6 --seconds 2 --seed 3 --quiet "
+  SummaryJson(RunDiffdyn("collect --system cartpole --actuated all --trajectories 6 --seconds 2 --seed 3 --quiet "
                   "--json --out " + data));
-  const auto t = Json(RunDiffdyn("train --data " + data + " --model delan-friction --prismatic 1 "
+  const auto t = SummaryJson(RunDiffdyn("train --data " + data + " --model delan-friction --prismatic 1 "
                                  "--angle-features sincos --epochs 40 --hidden 16 --seed 1 --quiet --json --out " +
                                  model));
   EXPECT_EQ(t.at("model").get<std::string>(), "delan-friction");
@@ -122,14 +118,14 @@ TEST(DelanCli, FrictionModelOnTheCartpoleTrainsEvaluatesAndControls) {
   const nlohmann::json j = nlohmann::json::parse(file);
   EXPECT_EQ(j.at("kind").get<std::string>(), "delan-friction");
   EXPECT_EQ(j.at("architecture").at("periodic"), nlohmann::json::array({1}));
-  const auto e = Json(RunDiffdyn("eval --model " + model + " --data " + data + " --json"));
+  const auto e = SummaryJson(RunDiffdyn("eval --model " + model + " --data " + data + " --json"));
   EXPECT_EQ(e.at("model").get<std::string>(), "delan-friction");
   for (const char* key : {"friction_nmse", "kinetic_nmse", "potential_nmse", "power_nmse", "viscous_1",
                           "viscous_2", "coulomb_1", "coulomb_2", "single_step_loss"}) {
     ASSERT_TRUE(e.contains(key)) << key;
     EXPECT_GE(e.at(key).get<double>(), 0.0) << key;
   }
-  const auto c = Json(RunDiffdyn("control --system cartpole --controller mppi --model " + model +
+  const auto c = SummaryJson(RunDiffdyn("control --system cartpole --controller mppi --model " + model +
                                  " --starts 1 --samples 16 --horizon 0.2 --seed 1 --json"));
   EXPECT_EQ(c.at("starts").get<int>(), 1);
   const auto r = RunDiffdyn("train --data " + data + " --model delan --prismatic 3 --angle-features sincos "

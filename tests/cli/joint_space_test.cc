@@ -15,31 +15,27 @@ namespace {
 
 using testing::CountLines;
 using testing::RunDiffdyn;
+using testing::SummaryJson;
 using testing::TempPath;
 
 const std::string kPanda = std::string(DIFFDYN_SHARED_DATA_DIR) + "/panda_gaz2019_traj1";
 
-nlohmann::json Json(const testing::CommandResult& r) {
-  EXPECT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_EQ(CountLines(r.out), 1) << r.out;
-  return nlohmann::json::parse(r.out);
-}
 
 // A small pendulum NeuralODE learns the dynamics: its single-step loss on a fresh
 // seeded file is a small fraction of the "state stays" baseline.
 TEST(JointSpace, CollectTrainEvalPendulum) {
   const std::string train = TempPath("js_pendulum_train.csv"), test = TempPath("js_pendulum_test.csv");
-  const auto c = Json(RunDiffdyn("collect --system pendulum --trajectories 20 --seconds 2 --seed 3 --quiet --json --out " + train));
+  const auto c = SummaryJson(RunDiffdyn("collect --system pendulum --trajectories 20 --seconds 2 --seed 3 --quiet --json --out " + train));
   EXPECT_EQ(c.at("trajectories").get<int>(), 20);
   EXPECT_EQ(c.at("pushes").get<int>(), 1000);
   EXPECT_GT(c.at("samples_per_second").get<double>(), 0.0);
-  Json(RunDiffdyn("collect --system pendulum --trajectories 5 --seconds 2 --seed 4 --quiet --json --out " + test));
+  SummaryJson(RunDiffdyn("collect --system pendulum --trajectories 5 --seconds 2 --seed 4 --quiet --json --out " + test));
   const std::string model = TempPath("js_pendulum.json");
-  const auto t = Json(RunDiffdyn("train --data " + train + " --model abs-node --hidden 16 --steps 3 --epochs 30 "
+  const auto t = SummaryJson(RunDiffdyn("train --data " + train + " --model abs-node --hidden 16 --steps 3 --epochs 30 "
                                  "--lr 3e-3 --batch 100 --seed 1 --quiet --json --out " + model));
   EXPECT_EQ(t.at("n_train").get<int>() + t.at("n_val").get<int>(), 1000);
   EXPECT_NEAR(t.at("dt").get<double>(), 0.04, 1e-12);
-  const auto e = Json(RunDiffdyn("eval --model " + model + " --data " + test + " --json"));
+  const auto e = SummaryJson(RunDiffdyn("eval --model " + model + " --data " + test + " --json"));
   EXPECT_EQ(e.at("n_samples").get<int>(), 250);
   const double loss = e.at("single_step_loss").get<double>();
   const double baseline = e.at("baseline_single_step_loss").get<double>();
@@ -47,7 +43,7 @@ TEST(JointSpace, CollectTrainEvalPendulum) {
   EXPECT_LT(loss, 0.03 * baseline);
   // The analytic model of other parameters (the model's own defaults) is worse
   // than the learned one but far better than the baseline.
-  const auto analytic = Json(RunDiffdyn("eval --model pendulum --data " + test + " --json"));
+  const auto analytic = SummaryJson(RunDiffdyn("eval --model pendulum --data " + test + " --json"));
   EXPECT_LT(analytic.at("single_step_loss").get<double>(), baseline);
 }
 
@@ -65,8 +61,8 @@ TEST(JointSpace, EvalTakesDiagnosesExtendedModelOnThePandaLog) {
   log.tau.conservativeResize(Eigen::NoChange, keep);
   const std::string head = TempPath("js_panda_head.csv");
   WriteJointCsv(head, log);
-  const auto extended = Json(RunDiffdyn("eval --model " + out + "/extended_model.json --data " + head + " --json"));
-  const auto nominal = Json(RunDiffdyn("eval --model panda --data " + head + " --json"));
+  const auto extended = SummaryJson(RunDiffdyn("eval --model " + out + "/extended_model.json --data " + head + " --json"));
+  const auto nominal = SummaryJson(RunDiffdyn("eval --model panda --data " + head + " --json"));
   EXPECT_EQ(extended.at("n_samples").get<int>(), keep - 1);
   EXPECT_EQ(extended.at("model").get<std::string>(), "extended-physics");
   EXPECT_GT(extended.at("dt_jitter").get<double>(), 1.0);
@@ -74,7 +70,7 @@ TEST(JointSpace, EvalTakesDiagnosesExtendedModelOnThePandaLog) {
 }
 
 TEST(JointSpace, TrainOnTheRealPandaLogReportsFiniteLosses) {
-  const auto t = Json(RunDiffdyn("train --data " + kPanda + " --model res-nn --hidden 16 --epochs 2 --quiet --json --out " +
+  const auto t = SummaryJson(RunDiffdyn("train --data " + kPanda + " --model res-nn --hidden 16 --epochs 2 --quiet --json --out " +
                                  TempPath("js_panda_resnn.json")));
   EXPECT_EQ(t.at("n_train").get<int>() + t.at("n_val").get<int>(), 20543);
   EXPECT_TRUE(t.at("final_val_loss").is_number());

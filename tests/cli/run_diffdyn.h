@@ -17,6 +17,7 @@
 #include <string>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 namespace diffdyn::testing {
 
@@ -70,6 +71,13 @@ inline int CountLines(const std::string& s) {
   int n = 0;
   for (char c : s) n += c == '\n';
   return n;
+}
+
+/// The one-line JSON summary of a run that must succeed (exit 0, one line on stdout).
+inline nlohmann::json SummaryJson(const CommandResult& r) {
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(CountLines(r.out), 1) << r.out;
+  return nlohmann::json::parse(r.out);
 }
 
 }  // namespace diffdyn::testing

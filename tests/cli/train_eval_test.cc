@@ -15,6 +15,7 @@
 namespace diffdyn {
 namespace {
 
+using testing::CountLines;
 using testing::RunDiffdyn;
 
 const std::string kData = std::string(DIFFDYN_SHARED_DATA_DIR) + "/pybullet_pushing/collected_data.csv";
@@ -31,12 +32,6 @@ std::string WriteTemp(const std::string& name, const std::string& contents) {
   const std::string path = ::testing::TempDir() + "/" + name;
   std::ofstream(path) << contents;
   return path;
-}
-
-int CountLines(const std::string& s) {
-  int n = 0;
-  for (char c : s) n += c == '\n';
-  return n;
 }
 
 TEST(TrainCommand, HelpPrintsTheIssueDefaults) {

@@ -12,8 +12,6 @@
 namespace diffdyn {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-
 // The task's plant through ExtendedModel (effects.h, every effect kind) and the
 // generic adapter, the actuated torques spread to full torque by hand.
 struct FullTorquePlant {
@@ -53,30 +51,31 @@ TEST(ControlTask, PlantModelMatchesTheEffectLibrary) {
 TEST(ControlTask, CostsAreTheTaskTable) {
   const ControlTask pendulum = ControlTaskByName("pendulum");
   // q = pi sin(theta / 2)^2 weighting: hanging (q = 0) costs pi^2, upright 0, any turn the same.
-  EXPECT_NEAR(pendulum.StateCost(Eigen::Vector2d(0.0, 0.0)), kPi * kPi, 1e-12);
-  EXPECT_NEAR(pendulum.StateCost(Eigen::Vector2d(kPi, 2.0)), 0.4, 1e-12);
-  EXPECT_NEAR(pendulum.StateCost(Eigen::Vector2d(3 * kPi, 0.0)), 0.0, 1e-12);
+  EXPECT_NEAR(pendulum.StateCost(Eigen::Vector2d(0.0, 0.0)), std::numbers::pi * std::numbers::pi, 1e-12);
+  EXPECT_NEAR(pendulum.StateCost(Eigen::Vector2d(std::numbers::pi, 2.0)), 0.4, 1e-12);
+  EXPECT_NEAR(pendulum.StateCost(Eigen::Vector2d(3 * std::numbers::pi, 0.0)), 0.0, 1e-12);
   // Log-cosine: g(0) = 0, even, and its closed form at u = 1.
-  const double u_max = 2.501, beta = 4 * u_max * u_max * 0.5 / kPi;
-  const double g1 = -(2 * beta * u_max / kPi) * std::log(std::cos(kPi * 1.0 / (2 * u_max)));
+  const double u_max = 2.501, beta = 4 * u_max * u_max * 0.5 / std::numbers::pi;
+  const double g1 =
+      -(2 * beta * u_max / std::numbers::pi) * std::log(std::cos(std::numbers::pi * 1.0 / (2 * u_max)));
   EXPECT_EQ(pendulum.action_cost(Eigen::VectorXd::Zero(1)), 0.0);
   EXPECT_NEAR(pendulum.action_cost(Eigen::VectorXd::Constant(1, 1.0)), g1, 1e-12);
   EXPECT_NEAR(pendulum.action_cost(Eigen::VectorXd::Constant(1, -1.0)), g1, 1e-12);
 
   const ControlTask cartpole = ControlTaskByName("cartpole");
-  Eigen::Vector4d x(0.2, kPi, 1.0, -2.0);
+  Eigen::Vector4d x(0.2, std::numbers::pi, 1.0, -2.0);
   EXPECT_NEAR(cartpole.RunningCost(x, Eigen::VectorXd::Constant(1, 3.0)),
-              0.04 + kPi * kPi + 0.1 * (1.0 + 4.0) + 0.01 * 9.0, 1e-12);
+              0.04 + std::numbers::pi * std::numbers::pi + 0.1 * (1.0 + 4.0) + 0.01 * 9.0, 1e-12);
 }
 
 TEST(ControlTask, SuccessIsTestedOnTheCircleAndLimitsFail) {
   const ControlTask pendulum = ControlTaskByName("pendulum");
-  EXPECT_TRUE(pendulum.Succeeded(Eigen::Vector2d(kPi + 0.05, 0.4)));
-  EXPECT_TRUE(pendulum.Succeeded(Eigen::Vector2d(-kPi - 0.05, -0.4)));  // the same point, one turn back
-  EXPECT_FALSE(pendulum.Succeeded(Eigen::Vector2d(kPi + 0.15, 0.0)));
-  EXPECT_FALSE(pendulum.Succeeded(Eigen::Vector2d(kPi, 0.6)));
+  EXPECT_TRUE(pendulum.Succeeded(Eigen::Vector2d(std::numbers::pi + 0.05, 0.4)));
+  EXPECT_TRUE(pendulum.Succeeded(Eigen::Vector2d(-std::numbers::pi - 0.05, -0.4)));  // the same point, one turn back
+  EXPECT_FALSE(pendulum.Succeeded(Eigen::Vector2d(std::numbers::pi + 0.15, 0.0)));
+  EXPECT_FALSE(pendulum.Succeeded(Eigen::Vector2d(std::numbers::pi, 0.6)));
   const ControlTask cartpole = ControlTaskByName("cartpole");
-  EXPECT_TRUE(cartpole.Succeeded(Eigen::Vector4d(0.3, 2 * kPi + 0.05, 5.0, 0.1)));
+  EXPECT_TRUE(cartpole.Succeeded(Eigen::Vector4d(0.3, 2 * std::numbers::pi + 0.05, 5.0, 0.1)));
   EXPECT_FALSE(cartpole.Succeeded(Eigen::Vector4d(0.6, 0.0, 0.0, 0.0)));  // off the track
   EXPECT_TRUE(cartpole.OutOfLimits(Eigen::Vector4d(-0.51, 0.0, 0.0, 0.0)));
   EXPECT_THROW(ControlTaskByName("pushing"), Error);
@@ -90,7 +89,7 @@ TEST(ControlTask, StartsAreSeededAndInsideTheBox) {
     EXPECT_EQ(x, task.SampleStart(b));
     EXPECT_TRUE(((x - task.start_low).array() >= 0).all() && ((task.start_high - x).array() >= 0).all());
     EXPECT_EQ(x[2], 0.0);
-    EXPECT_LE(std::abs(x[1] - kPi), 0.1);
+    EXPECT_LE(std::abs(x[1] - std::numbers::pi), 0.1);
   }
 }
 

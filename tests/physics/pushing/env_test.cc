@@ -16,8 +16,6 @@
 namespace diffdyn {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
-
 TEST(PandaIk, ReachesPushingTargetsWithinLimits) {
   PandaIk ik;
   for (const Eigen::Vector3d& target : {Eigen::Vector3d(0.5, 0.0, 0.02), Eigen::Vector3d(0.7, 0.3, 0.02),
@@ -56,8 +54,8 @@ TEST(PushingEnv, QuickCheckOfRandomPushes) {
       const Eigen::Vector3d s = t.states.col(k);
       EXPECT_LT(PushingEnv::ObstaclePenetration(s), 2e-3) << s.transpose();
       EXPECT_TRUE(s.allFinite());
-      EXPECT_GT(s.z(), -kPi - 1e-12);
-      EXPECT_LE(s.z(), kPi + 1e-12);
+      EXPECT_GT(s.z(), -std::numbers::pi - 1e-12);
+      EXPECT_LE(s.z(), std::numbers::pi + 1e-12);
     }
   }
 }
@@ -154,7 +152,7 @@ TEST(PushingEnv, BlockPushedOffTheTableEndsWithOffTable) {
   PushingConfig config;
   config.obstacle = false;
   PushingEnv env(config);
-  env.Reset({0.45, 0.47, kPi / 2});  // 3 cm from the table's +y edge, facing it
+  env.Reset({0.45, 0.47, std::numbers::pi / 2});  // 3 cm from the table's +y edge, facing it
   const PushResult r = env.Step({0.0, 0.0, 1.0});
   EXPECT_EQ(r.status, PushStatus::kOffTable);
   EXPECT_STREQ(PushStatusName(r.status), "off_table");

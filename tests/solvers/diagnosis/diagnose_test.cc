@@ -26,7 +26,7 @@ fs::path TempDir(const std::string& name) {
   return dir;
 }
 
-void WriteText(const fs::path& path, const std::string& text) {
+void WriteFileText(const fs::path& path, const std::string& text) {
   std::ofstream out(path);
   out << text;
 }
@@ -51,23 +51,23 @@ TEST(JointData, CsvRoundTripAndErrorsNameTheLine) {
   EXPECT_EQ(back.size(), 20);
   EXPECT_LT((back.tau - data.tau).cwiseAbs().maxCoeff(), 1e-15);
   // Columns in any order are found by name.
-  WriteText(dir / "b.csv", "tau1,qd1,t,q1\n1,2,0,3\n1,2,0.1,3\n1,2,0.2,3\n");
+  WriteFileText(dir / "b.csv", "tau1,qd1,t,q1\n1,2,0,3\n1,2,0.1,3\n1,2,0.2,3\n");
   EXPECT_DOUBLE_EQ(ReadJointCsv((dir / "b.csv").string()).q(0, 1), 3.0);
-  WriteText(dir / "c.csv", "t,q1,qd1\n0,1,2\n");
+  WriteFileText(dir / "c.csv", "t,q1,qd1\n0,1,2\n");
   try {
     ReadJointCsv((dir / "c.csv").string());
     FAIL();
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("c.csv:1: no column 'tau1'"), std::string::npos) << e.what();
   }
-  WriteText(dir / "d.csv", "t,q1,qd1,tau1\n0,1,2,3\n0.1,x,2,3\n0.2,1,2,3\n");
+  WriteFileText(dir / "d.csv", "t,q1,qd1,tau1\n0,1,2,3\n0.1,x,2,3\n0.2,1,2,3\n");
   try {
     ReadJointCsv((dir / "d.csv").string());
     FAIL();
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("d.csv:3"), std::string::npos) << e.what();
   }
-  WriteText(dir / "e.csv", "t,q1,qd1,tau1\n0,1,2,3\n0.1,1,2,3\n0.05,1,2,3\n");
+  WriteFileText(dir / "e.csv", "t,q1,qd1,tau1\n0,1,2,3\n0.1,1,2,3\n0.05,1,2,3\n");
   EXPECT_THROW(ReadJointCsv((dir / "e.csv").string()), Error);
   EXPECT_THROW(ReadMeasured((dir / "missing.csv").string()), Error);
 }
@@ -124,7 +124,7 @@ TEST(ExtendedModelFile, RoundTripAndValidation) {
   EXPECT_EQ(back.effects()[0].kind, EffectKind::kViscous);
   EXPECT_DOUBLE_EQ(back.effects()[1].params[0], 0.01);
   EXPECT_DOUBLE_EQ(back.effects()[0].stderrs[0], 0.01);
-  WriteText(dir / "bad.json", "{\"format\": \"diffdyn-model\"");
+  WriteFileText(dir / "bad.json", "{\"format\": \"diffdyn-model\"");
   EXPECT_THROW(LoadExtendedModel(dir / "bad.json"), Error);
 }
 
