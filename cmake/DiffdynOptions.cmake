@@ -61,12 +61,36 @@ endfunction()
 # diffdyn_precompile_headers(target [more headers]) precompiles the third-party
 # headers every file of a multi-file target includes (Eigen, Ceres' Jet, odeint,
 # nlohmann-json: about 8 s of parsing per file with g++ 12), once per target.
-# Single-file programs gain nothing and do without. Nothing here is exported;
+# Single-file programs share one per group (below). Nothing here is exported;
 # DIFFDYN_PRECOMPILE_HEADERS=OFF compiles each file on its own includes.
 function(diffdyn_precompile_headers target)
   if(DIFFDYN_PRECOMPILE_HEADERS)
     target_precompile_headers(${target} PRIVATE
       <algorithm> <cmath> <functional> <memory> <string> <vector>
       <Eigen/Dense> <ceres/jet.h> <boost/numeric/odeint.hpp> <nlohmann/json.hpp> ${ARGN})
+  endif()
+endfunction()
+
+# diffdyn_share_program_headers(group target) gives a single-file program (an
+# example, a figure, a benchmark, a fuzz target) the precompiled header of its
+# group: the group's first program precompiles the third-party headers, the command
+# line's and the learned models' header (with clang, their templates instantiated
+# once), and every later program of the group reuses that one file. Programs of a
+# group share their compile flags: each links the libraries whose usage requirements
+# the header is compiled with (clang refuses a header built with other macros).
+# Macros a program defines for itself (a figure's directory) are not used by those
+# headers.
+function(diffdyn_share_program_headers group target)
+  if(NOT DIFFDYN_PRECOMPILE_HEADERS)
+    return()
+  endif()
+  target_link_libraries(${target} PRIVATE diffdyn_solvers diffdyn_pusher fmt::fmt
+    nlohmann_json::nlohmann_json CLI11::CLI11)
+  get_property(owner GLOBAL PROPERTY DIFFDYN_PCH_OWNER_${group})
+  if(owner)
+    target_precompile_headers(${target} REUSE_FROM ${owner})
+  else()
+    diffdyn_precompile_headers(${target} <CLI/CLI.hpp> <fmt/core.h> <diffdyn/models/learned_model.h>)
+    set_property(GLOBAL PROPERTY DIFFDYN_PCH_OWNER_${group} ${target})
   endif()
 endfunction()
