@@ -25,15 +25,16 @@ using testing::TempPath;
 
 const std::string kCharacters = std::string(DIFFDYN_SHARED_DATA_DIR) + "/delan_characters";
 
-
 TEST(DelanCli, TrainThenEvalOnTheCharacters) {
   const std::string model = TempPath("delan_chars.json");
-  const auto t = SummaryJson(RunDiffdyn("train --data " + kCharacters +
-                                 " --model delan --epochs 300 --seed 2 --quiet --json --out " + model));
+  const auto t =
+      SummaryJson(RunDiffdyn("train --data " + kCharacters +
+                             " --model delan --epochs 300 --seed 2 --quiet --json --out " + model));
   EXPECT_EQ(t.at("n_train").get<int>(), 2459);
   EXPECT_EQ(t.at("n_val").get<int>(), 454);
   EXPECT_EQ(t.at("model").get<std::string>(), "delan");
-  const auto e = SummaryJson(RunDiffdyn("eval --model " + model + " --data " + kCharacters + " --json"));
+  const auto e =
+      SummaryJson(RunDiffdyn("eval --model " + model + " --data " + kCharacters + " --json"));
   EXPECT_EQ(e.at("n_samples").get<int>(), 454);
   EXPECT_EQ(e.at("model").get<std::string>(), "delan");
   // 300 epochs already explain most of the torque's variance with a positive definite H.
@@ -50,10 +51,11 @@ TEST(DelanCli, TrainThenEvalOnTheCharacters) {
 
 TEST(DelanCli, DataOfAnotherSizeIsOneLineError) {
   const std::string model = TempPath("delan_chars_small.json");
-  SummaryJson(RunDiffdyn("train --data " + kCharacters + " --model delan --epochs 1 --hidden 4 --quiet --json --out " +
-                  model));
+  SummaryJson(RunDiffdyn("train --data " + kCharacters +
+                         " --model delan --epochs 1 --hidden 4 --quiet --json --out " + model));
   const std::string pendulum = TempPath("delan_pendulum.csv");
-  SummaryJson(RunDiffdyn("collect --system pendulum --trajectories 2 --seconds 1 --quiet --json --out " + pendulum));
+  SummaryJson(RunDiffdyn(
+      "collect --system pendulum --trajectories 2 --seconds 1 --quiet --json --out " + pendulum));
   const auto r = RunDiffdyn("eval --model " + model + " --data " + pendulum + " --json");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_EQ(CountLines(r.err), 1) << r.err;
@@ -78,7 +80,9 @@ TEST(DelanCli, DataWithoutJointsOrTorquesIsRefused) {
 // Without a qdd column the accelerations are estimated (10 Hz smoothing) and training runs.
 TEST(DelanCli, EstimatesAccelerationsWhenTheDataHasNone) {
   const std::string with = TempPath("delan_pend_qdd.csv"), without = TempPath("delan_pend_noqdd.csv");
-  SummaryJson(RunDiffdyn("collect --system pendulum --trajectories 6 --seconds 5 --seed 5 --quiet --json --out " + with));
+  SummaryJson(RunDiffdyn(
+      "collect --system pendulum --trajectories 6 --seconds 5 --seed 5 --quiet --json --out " +
+      with));
   // Drop the qdd1 column.
   std::ifstream in(with);
   std::ofstream out(without);
@@ -97,8 +101,10 @@ TEST(DelanCli, EstimatesAccelerationsWhenTheDataHasNone) {
   }
   out.close();
   const std::string model = TempPath("delan_pend_noqdd.json");
-  const auto t = SummaryJson(RunDiffdyn("train --data " + without + " --model delan --epochs 5 --hidden 8 --seed 1 "
-                                 "--quiet --json --out " + model));
+  const auto t = SummaryJson(RunDiffdyn("train --data " + without +
+                                        " --model delan --epochs 5 --hidden 8 --seed 1 "
+                                        "--quiet --json --out " +
+                                        model));
   EXPECT_GT(t.at("n_train").get<int>(), 0);
   EXPECT_TRUE(std::isfinite(t.at("final_val_loss").get<double>()));
 }
@@ -108,11 +114,15 @@ TEST(DelanCli, EstimatesAccelerationsWhenTheDataHasNone) {
 // (one actuated joint of two); an unknown --prismatic joint is refused.
 TEST(DelanCli, FrictionModelOnTheCartpoleTrainsEvaluatesAndControls) {
   const std::string data = TempPath("delan_cartpole_all.csv"), model = TempPath("delan_cartpole.json");
-  SummaryJson(RunDiffdyn("collect --system cartpole --actuated all --trajectories 6 --seconds 2 --seed 3 --quiet "
-                  "--json --out " + data));
-  const auto t = SummaryJson(RunDiffdyn("train --data " + data + " --model delan-friction --prismatic 1 "
-                                 "--angle-features sincos --epochs 40 --hidden 16 --seed 1 --quiet --json --out " +
-                                 model));
+  SummaryJson(RunDiffdyn(
+      "collect --system cartpole --actuated all --trajectories 6 --seconds 2 --seed 3 --quiet "
+      "--json --out " +
+      data));
+  const auto t = SummaryJson(
+      RunDiffdyn("train --data " + data +
+                 " --model delan-friction --prismatic 1 "
+                 "--angle-features sincos --epochs 40 --hidden 16 --seed 1 --quiet --json --out " +
+                 model));
   EXPECT_EQ(t.at("model").get<std::string>(), "delan-friction");
   std::ifstream file(model);
   const nlohmann::json j = nlohmann::json::parse(file);
@@ -125,8 +135,9 @@ TEST(DelanCli, FrictionModelOnTheCartpoleTrainsEvaluatesAndControls) {
     ASSERT_TRUE(e.contains(key)) << key;
     EXPECT_GE(e.at(key).get<double>(), 0.0) << key;
   }
-  const auto c = SummaryJson(RunDiffdyn("control --system cartpole --controller mppi --model " + model +
-                                 " --starts 1 --samples 16 --horizon 0.2 --seed 1 --json"));
+  const auto c =
+      SummaryJson(RunDiffdyn("control --system cartpole --controller mppi --model " + model +
+                             " --starts 1 --samples 16 --horizon 0.2 --seed 1 --json"));
   EXPECT_EQ(c.at("starts").get<int>(), 1);
   const auto r = RunDiffdyn("train --data " + data + " --model delan --prismatic 3 --angle-features sincos "
                             "--epochs 1 --quiet --out " + TempPath("delan_bad_prismatic.json"));

@@ -15,7 +15,6 @@ using testing::RunDiffdyn;
 using testing::SummaryJson;
 using testing::TempPath;
 
-
 // A pendulum with hidden viscous friction: diagnose names it; fed back on a
 // fresh record of the same plant, the extended model has nothing missing.
 TEST(Diagnose, AnExtendedModelFedBackHasNothingMissing) {
@@ -27,7 +26,8 @@ TEST(Diagnose, AnExtendedModelFedBackHasNothingMissing) {
               0);
   }
   const std::string first = TempPath("diag_fed_first"), second = TempPath("diag_fed_second");
-  const auto j = SummaryJson(RunDiffdyn("diagnose --model pendulum --measured " + a + " --json --out " + first));
+  const auto j = SummaryJson(
+      RunDiffdyn("diagnose --model pendulum --measured " + a + " --json --out " + first));
   bool viscous = false;
   for (const auto& e : j.at("named_effects")) {
     if (e.at("kind") == "viscous") viscous = std::abs(e.at("value").get<double>() - 0.2) < 0.03;
@@ -40,8 +40,9 @@ TEST(Diagnose, AnExtendedModelFedBackHasNothingMissing) {
   EXPECT_GT(j.at("noise_std")[0].get<double>(), 0.0);
   EXPECT_TRUE(j.at("not_identifiable").is_array());
 
-  const auto k = SummaryJson(RunDiffdyn("diagnose --model " + first + "/extended_model.json --measured " + b +
-                                 " --json --out " + second));
+  const auto k =
+      SummaryJson(RunDiffdyn("diagnose --model " + first + "/extended_model.json --measured " + b +
+                             " --json --out " + second));
   EXPECT_TRUE(k.at("no_significant_discrepancy").get<bool>()) << k.at("named_effects").dump();
   EXPECT_TRUE(k.at("named_effects").empty());
   EXPECT_LT(k.at("heldout_sse_removed").get<double>(), 0.05);
@@ -54,8 +55,8 @@ TEST(Diagnose, AnExtendedModelFedBackHasNothingMissing) {
 TEST(Diagnose, AnUnactuatedJointDoesNotPassASystemWideEffect) {
   const std::string data = TempPath("diag_cartpole_task.csv");
   ASSERT_EQ(RunDiffdyn("collect --system cartpole --seed 3 --trajectories 20 --quiet --out " + data).exit_code, 0);
-  const auto j = SummaryJson(RunDiffdyn("diagnose --model cartpole --measured " + data + " --json --out " +
-                                 TempPath("diag_cartpole_task")));
+  const auto j = SummaryJson(RunDiffdyn("diagnose --model cartpole --measured " + data +
+                                        " --json --out " + TempPath("diag_cartpole_task")));
   EXPECT_EQ(j.at("noise_std")[1].get<double>(), 0.0);
   for (const auto& e : j.at("named_effects")) EXPECT_NE(e.at("joint").get<int>(), 0) << e.dump();
 }

@@ -20,19 +20,24 @@ using testing::TempPath;
 
 const std::string kPanda = std::string(DIFFDYN_SHARED_DATA_DIR) + "/panda_gaz2019_traj1";
 
-
 // A small pendulum NeuralODE learns the dynamics: its single-step loss on a fresh
 // seeded file is a small fraction of the "state stays" baseline.
 TEST(JointSpace, CollectTrainEvalPendulum) {
   const std::string train = TempPath("js_pendulum_train.csv"), test = TempPath("js_pendulum_test.csv");
-  const auto c = SummaryJson(RunDiffdyn("collect --system pendulum --trajectories 20 --seconds 2 --seed 3 --quiet --json --out " + train));
+  const auto c = SummaryJson(RunDiffdyn(
+      "collect --system pendulum --trajectories 20 --seconds 2 --seed 3 --quiet --json --out " +
+      train));
   EXPECT_EQ(c.at("trajectories").get<int>(), 20);
   EXPECT_EQ(c.at("pushes").get<int>(), 1000);
   EXPECT_GT(c.at("samples_per_second").get<double>(), 0.0);
-  SummaryJson(RunDiffdyn("collect --system pendulum --trajectories 5 --seconds 2 --seed 4 --quiet --json --out " + test));
+  SummaryJson(RunDiffdyn(
+      "collect --system pendulum --trajectories 5 --seconds 2 --seed 4 --quiet --json --out " +
+      test));
   const std::string model = TempPath("js_pendulum.json");
-  const auto t = SummaryJson(RunDiffdyn("train --data " + train + " --model abs-node --hidden 16 --steps 3 --epochs 30 "
-                                 "--lr 3e-3 --batch 100 --seed 1 --quiet --json --out " + model));
+  const auto t = SummaryJson(RunDiffdyn("train --data " + train +
+                                        " --model abs-node --hidden 16 --steps 3 --epochs 30 "
+                                        "--lr 3e-3 --batch 100 --seed 1 --quiet --json --out " +
+                                        model));
   EXPECT_EQ(t.at("n_train").get<int>() + t.at("n_val").get<int>(), 1000);
   EXPECT_NEAR(t.at("dt").get<double>(), 0.04, 1e-12);
   const auto e = SummaryJson(RunDiffdyn("eval --model " + model + " --data " + test + " --json"));
@@ -61,7 +66,8 @@ TEST(JointSpace, EvalTakesDiagnosesExtendedModelOnThePandaLog) {
   log.tau.conservativeResize(Eigen::NoChange, keep);
   const std::string head = TempPath("js_panda_head.csv");
   WriteJointCsv(head, log);
-  const auto extended = SummaryJson(RunDiffdyn("eval --model " + out + "/extended_model.json --data " + head + " --json"));
+  const auto extended = SummaryJson(
+      RunDiffdyn("eval --model " + out + "/extended_model.json --data " + head + " --json"));
   const auto nominal = SummaryJson(RunDiffdyn("eval --model panda --data " + head + " --json"));
   EXPECT_EQ(extended.at("n_samples").get<int>(), keep - 1);
   EXPECT_EQ(extended.at("model").get<std::string>(), "extended-physics");
@@ -70,8 +76,9 @@ TEST(JointSpace, EvalTakesDiagnosesExtendedModelOnThePandaLog) {
 }
 
 TEST(JointSpace, TrainOnTheRealPandaLogReportsFiniteLosses) {
-  const auto t = SummaryJson(RunDiffdyn("train --data " + kPanda + " --model res-nn --hidden 16 --epochs 2 --quiet --json --out " +
-                                 TempPath("js_panda_resnn.json")));
+  const auto t = SummaryJson(RunDiffdyn(
+      "train --data " + kPanda + " --model res-nn --hidden 16 --epochs 2 --quiet --json --out " +
+      TempPath("js_panda_resnn.json")));
   EXPECT_EQ(t.at("n_train").get<int>() + t.at("n_val").get<int>(), 20543);
   EXPECT_TRUE(t.at("final_val_loss").is_number());
   EXPECT_GT(t.at("dt_jitter").get<double>(), 1.0);

@@ -51,13 +51,14 @@ TEST(ControlTask, PlantModelMatchesTheEffectLibrary) {
 TEST(ControlTask, CostsAreTheTaskTable) {
   const ControlTask pendulum = ControlTaskByName("pendulum");
   // q = pi sin(theta / 2)^2 weighting: hanging (q = 0) costs pi^2, upright 0, any turn the same.
-  EXPECT_NEAR(pendulum.StateCost(Eigen::Vector2d(0.0, 0.0)), std::numbers::pi * std::numbers::pi, 1e-12);
+  EXPECT_NEAR(pendulum.StateCost(Eigen::Vector2d(0.0, 0.0)), std::numbers::pi * std::numbers::pi,
+              1e-12);
   EXPECT_NEAR(pendulum.StateCost(Eigen::Vector2d(std::numbers::pi, 2.0)), 0.4, 1e-12);
   EXPECT_NEAR(pendulum.StateCost(Eigen::Vector2d(3 * std::numbers::pi, 0.0)), 0.0, 1e-12);
   // Log-cosine: g(0) = 0, even, and its closed form at u = 1.
   const double u_max = 2.501, beta = 4 * u_max * u_max * 0.5 / std::numbers::pi;
-  const double g1 =
-      -(2 * beta * u_max / std::numbers::pi) * std::log(std::cos(std::numbers::pi * 1.0 / (2 * u_max)));
+  const double g1 = -(2 * beta * u_max / std::numbers::pi) *
+                    std::log(std::cos(std::numbers::pi * 1.0 / (2 * u_max)));
   EXPECT_EQ(pendulum.action_cost(Eigen::VectorXd::Zero(1)), 0.0);
   EXPECT_NEAR(pendulum.action_cost(Eigen::VectorXd::Constant(1, 1.0)), g1, 1e-12);
   EXPECT_NEAR(pendulum.action_cost(Eigen::VectorXd::Constant(1, -1.0)), g1, 1e-12);
@@ -71,7 +72,8 @@ TEST(ControlTask, CostsAreTheTaskTable) {
 TEST(ControlTask, SuccessIsTestedOnTheCircleAndLimitsFail) {
   const ControlTask pendulum = ControlTaskByName("pendulum");
   EXPECT_TRUE(pendulum.Succeeded(Eigen::Vector2d(std::numbers::pi + 0.05, 0.4)));
-  EXPECT_TRUE(pendulum.Succeeded(Eigen::Vector2d(-std::numbers::pi - 0.05, -0.4)));  // the same point, one turn back
+  EXPECT_TRUE(pendulum.Succeeded(
+      Eigen::Vector2d(-std::numbers::pi - 0.05, -0.4)));  // the same point, one turn back
   EXPECT_FALSE(pendulum.Succeeded(Eigen::Vector2d(std::numbers::pi + 0.15, 0.0)));
   EXPECT_FALSE(pendulum.Succeeded(Eigen::Vector2d(std::numbers::pi, 0.6)));
   const ControlTask cartpole = ControlTaskByName("cartpole");
