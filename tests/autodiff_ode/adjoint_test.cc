@@ -17,42 +17,46 @@ namespace {
 
 // dz/dt = W2 tanh(W1 z + b1 + t v) + b2 with theta = [W1 (h x n), b1, W2 (n x h), b2]
 // (column-major); v is a fixed time direction, not a parameter.
-class TinyMlp {
+template <typename S>
+class TinyMlpT {
  public:
+  using Scalar = S;
+  using Mat = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
+  using Vec = Eigen::Matrix<S, Eigen::Dynamic, 1>;
   struct Workspace {
-    Eigen::MatrixXd act, grad_pre;
+    Mat act, grad_pre;
   };
-  TinyMlp(int n, int h, std::uint64_t seed) : n_(n), h_(h), theta_(h * n + h + n * h + n), v_(h) {
+  TinyMlpT(int n, int h, std::uint64_t seed) : n_(n), h_(h), theta_(h * n + h + n * h + n), v_(h) {
     Rng rng(seed);
-    for (double& x : theta_) x = 0.6 * StandardNormal(rng);
-    for (double& x : v_) x = StandardNormal(rng);
+    for (S& x : theta_) x = S(0.6 * StandardNormal(rng));
+    for (S& x : v_) x = S(StandardNormal(rng));
   }
   int state_size() const { return n_; }
   int num_params() const { return static_cast<int>(theta_.size()); }
-  const Eigen::VectorXd& theta() const { return theta_; }
-  void set_theta(const Eigen::VectorXd& theta) { theta_ = theta; }
+  const Vec& theta() const { return theta_; }
+  void set_theta(const Eigen::VectorXd& theta) { theta_ = theta.cast<S>(); }
   Workspace MakeWorkspace(int batch) const {
-    return {Eigen::MatrixXd(h_, batch), Eigen::MatrixXd(h_, batch)};
+    return {Mat(h_, batch), Mat(h_, batch)};
   }
 
-  void Eval(const Eigen::Ref<const Eigen::MatrixXd>& z, double t, Eigen::Ref<Eigen::MatrixXd> dzdt,
+  void Eval(const Eigen::Ref<const Mat>& z, double t, Eigen::Ref<Mat> dzdt,
             Workspace& ws) const {
     Forward(z, t, ws);
     dzdt.noalias() = W2() * ws.act;
     dzdt.colwise() += b2();
   }
 
-  void Vjp(const Eigen::Ref<const Eigen::MatrixXd>& z, double t,
-           const Eigen::Ref<const Eigen::MatrixXd>& lambda, Eigen::Ref<Eigen::MatrixXd> vjp_z,
-           Eigen::Ref<Eigen::VectorXd> grad, Workspace& ws) const {
+  void Vjp(const Eigen::Ref<const Mat>& z, double t,
+           const Eigen::Ref<const Mat>& lambda, Eigen::Ref<Mat> vjp_z,
+           Eigen::Ref<Vec> grad, Workspace& ws) const {
     Forward(z, t, ws);
     // Gradient of the pre-activation: (W2^T lambda) * (1 - tanh^2).
     ws.grad_pre.noalias() = W2().transpose() * lambda;
-    ws.grad_pre.array() *= 1.0 - ws.act.array().square();
+    ws.grad_pre.array() *= S(1) - ws.act.array().square();
     vjp_z.noalias() = W1().transpose() * ws.grad_pre;
-    Eigen::Map<Eigen::MatrixXd>(grad.data(), h_, n_).noalias() += ws.grad_pre * z.transpose();
+    Eigen::Map<Mat>(grad.data(), h_, n_).noalias() += ws.grad_pre * z.transpose();
     grad.segment(h_ * n_, h_) += ws.grad_pre.rowwise().sum();
-    Eigen::Map<Eigen::MatrixXd>(grad.data() + h_ * n_ + h_, n_, h_).noalias() +=
+    Eigen::Map<Mat>(grad.data() + h_ * n_ + h_, n_, h_).noalias() +=
         lambda * ws.act.transpose();
     grad.tail(n_) += lambda.rowwise().sum();
   }
@@ -63,25 +67,27 @@ class TinyMlp {
     using M = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>;
     const Eigen::Map<const M> w1(theta.data(), h_, n_);
     const Eigen::Map<const M> w2(theta.data() + h_ * n_ + h_, n_, h_);
-    VectorX<T> pre = w1 * z + theta.segment(h_ * n_, h_) + v_.cast<T>() * T(t);
+    VectorX<T> pre = w1 * z + theta.segment(h_ * n_, h_) + v_.template cast<T>() * T(t);
     for (int i = 0; i < h_; ++i) pre[i] = tanh(pre[i]);
     dz = w2 * pre + theta.tail(n_);
   }
 
  private:
-  void Forward(const Eigen::Ref<const Eigen::MatrixXd>& z, double t, Workspace& ws) const {
+  void Forward(const Eigen::Ref<const Mat>& z, double t, Workspace& ws) const {
     ws.act.noalias() = W1() * z;
-    ws.act.colwise() += b1() + t * v_;
+    ws.act.colwise() += b1() + S(t) * v_;
     ws.act = ws.act.array().tanh();
   }
-  Eigen::Map<const Eigen::MatrixXd> W1() const { return {theta_.data(), h_, n_}; }
-  Eigen::VectorBlock<const Eigen::VectorXd> b1() const { return theta_.segment(h_ * n_, h_); }
-  Eigen::Map<const Eigen::MatrixXd> W2() const { return {theta_.data() + h_ * n_ + h_, n_, h_}; }
-  Eigen::VectorBlock<const Eigen::VectorXd> b2() const { return theta_.tail(n_); }
+  Eigen::Map<const Mat> W1() const { return {theta_.data(), h_, n_}; }
+  Eigen::VectorBlock<const Vec> b1() const { return theta_.segment(h_ * n_, h_); }
+  Eigen::Map<const Mat> W2() const { return {theta_.data() + h_ * n_ + h_, n_, h_}; }
+  Eigen::VectorBlock<const Vec> b2() const { return theta_.tail(n_); }
 
   int n_, h_;
-  Eigen::VectorXd theta_, v_;
+  Vec theta_, v_;
 };
+
+using TinyMlp = TinyMlpT<double>;
 
 static_assert(BatchedVjpSystem<TinyMlp>);
 
@@ -392,6 +398,76 @@ TEST(Adjoint, NonFiniteStateNamesTimeEntryAndSample) {
       EXPECT_NE(msg.find("entry 1 of sample 2"), std::string::npos) << msg;
       EXPECT_NE(msg.find("t = 0.5"), std::string::npos) << msg;
     }
+  }
+}
+
+// The float solver on the same system as the double one (weights rounded to float):
+// states, dL/dz0 and dL/dtheta agree to float rounding, relative to max(1, |x|), and
+// differ from the double ones somewhere (so the float path did run in float).
+struct FloatRun {
+  std::vector<Eigen::MatrixXd> outputs;
+  Eigen::MatrixXd g_z0;
+  Eigen::VectorXd g_theta;
+  long steps = 0;
+};
+
+template <typename S>
+FloatRun RunIn(const Problem& pr, const OdeOptions& options, bool continuous) {
+  using Mat = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
+  TinyMlpT<S> system(kN, kHidden, 7);
+  system.set_theta(pr.mlp.theta().template cast<float>().template cast<double>());
+  BatchedOdeSolver<TinyMlpT<S>> solver(system, options);
+  std::vector<Mat> outputs, weights;
+  for (const Eigen::MatrixXd& w : pr.weights) weights.push_back(w.cast<S>());
+  const Mat z0 = pr.z0.cast<float>().cast<S>();
+  FloatRun run;
+  run.steps = solver.Forward(z0, kTimes, &outputs, !continuous).accepted_steps;
+  Mat g_z0;
+  Eigen::Matrix<S, Eigen::Dynamic, 1> g_theta;
+  if (continuous) {
+    OdeOptions backward;
+    backward.method = Method::kRk4;
+    backward.dt = 0.01;
+    solver.BackwardContinuous(weights, backward, &g_z0, &g_theta);
+  } else {
+    solver.BackwardDiscrete(weights, &g_z0, &g_theta);
+  }
+  for (const Mat& o : outputs) run.outputs.push_back(o.template cast<double>());
+  run.g_z0 = g_z0.template cast<double>();
+  run.g_theta = g_theta.template cast<double>();
+  return run;
+}
+
+// max_i |a_i - b_i| / max(1, |b_i|) in units of float's epsilon.
+double FloatUlps(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+  const double eps = std::numeric_limits<float>::epsilon();
+  return ((a - b).array().abs() / b.array().abs().max(1.0)).maxCoeff() / eps;
+}
+
+TEST(BatchedOdeSolverFloat, StatesAndAdjointsMatchDoubleToFloatRounding) {
+  const Problem pr;
+  struct Case {
+    Method method;
+    bool continuous;
+  };
+  for (const Case c : {Case{Method::kRk4, false}, Case{Method::kEuler, false}, Case{Method::kDopri5, false},
+                       Case{Method::kRk4, true}}) {
+    OdeOptions options;
+    options.method = c.method;
+    options.dt = 0.05;
+    options.abs_tol = options.rel_tol = 1e-4;
+    const FloatRun f = RunIn<float>(pr, options, c.continuous);
+    const FloatRun d = RunIn<double>(pr, options, c.continuous);
+    const std::string label = MethodName(c.method) + (c.continuous ? " continuous" : " discrete");
+    EXPECT_EQ(f.steps, d.steps) << label;
+    double largest = 0;
+    for (size_t i = 0; i < d.outputs.size(); ++i) {
+      EXPECT_LT(FloatUlps(f.outputs[i], d.outputs[i]), 256) << label << ", output " << i;
+      largest = std::max(largest, (f.outputs[i] - d.outputs[i]).cwiseAbs().maxCoeff());
+    }
+    EXPECT_LT(FloatUlps(f.g_z0, d.g_z0), 1024) << label;
+    EXPECT_LT(FloatUlps(f.g_theta, d.g_theta), 1024) << label;
+    EXPECT_GT(largest, 0.0) << label << ": the float solver gave the double result";
   }
 }
 

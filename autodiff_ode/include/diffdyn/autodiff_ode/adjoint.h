@@ -9,6 +9,7 @@
 //
 //   struct MySystem {
 //     using Workspace = ...;           // per-thread scratch, sized once
+//     using Scalar = float;            // optional: the matrices' scalar (default double)
 //     int state_size() const;          // n
 //     int num_params() const;          // p: the flat parameter vector theta
 //     // dz/dt = f(z, t; theta) for B states at once: z, dzdt are n x B (column = sample)
@@ -61,6 +62,10 @@
 // that of the exact flow up to the solver tolerances: it converges to the discrete
 // one as both tolerances tighten.
 //
+// With Scalar = float every matrix (states, adjoints, tape, dL/dtheta) is float and
+// the products run in single precision; times, step sizes, the Butcher coefficients
+// and the adaptive error norm stay double (the norm is accumulated in double).
+//
 // Costs per step with s stages: forward s Evals (s - 1 with FSAL), discrete backward
 // one Vjp per needed stage, continuous backward one Eval + one Vjp per stage of the
 // backward solver. All buffers live in the solver object and are reused across
@@ -84,11 +89,26 @@
 
 namespace diffdyn {
 
-/// A system with batched Eval and Vjp over n x B matrices (see the header comment).
+/// The scalar of a batched system's matrices: S::Scalar if S declares it, else double.
 template <typename S>
-concept BatchedVjpSystem = requires(const S& s, const Eigen::MatrixXd& z, double t,
-                                    Eigen::MatrixXd& out, Eigen::VectorXd& grad,
-                                    typename S::Workspace& ws, int batch) {
+struct BatchedScalarOf {
+  using type = double;
+};
+template <typename S>
+  requires requires { typename S::Scalar; }
+struct BatchedScalarOf<S> {
+  using type = typename S::Scalar;
+};
+template <typename S>
+using BatchedScalar = typename BatchedScalarOf<S>::type;
+
+/// A system with batched Eval and Vjp over n x B matrices of BatchedScalar<S> (float or
+/// double; see the header comment).
+template <typename S>
+concept BatchedVjpSystem =
+    requires(const S& s, const Eigen::Matrix<BatchedScalar<S>, Eigen::Dynamic, Eigen::Dynamic>& z, double t,
+             Eigen::Matrix<BatchedScalar<S>, Eigen::Dynamic, Eigen::Dynamic>& out,
+             Eigen::Matrix<BatchedScalar<S>, Eigen::Dynamic, 1>& grad, typename S::Workspace& ws, int batch) {
   { s.state_size() } -> std::convertible_to<int>;
   { s.num_params() } -> std::convertible_to<int>;
   { s.MakeWorkspace(batch) } -> std::same_as<typename S::Workspace>;
@@ -102,6 +122,11 @@ concept BatchedVjpSystem = requires(const S& s, const Eigen::MatrixXd& z, double
 template <BatchedVjpSystem System>
 class BatchedOdeSolver {
  public:
+  /// float or double: the scalar of states, adjoints and gradients.
+  using Scalar = BatchedScalar<System>;
+  using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
+  using Vector = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
+
   /// Solver of `system` with `options` (method, fixed dt or adaptive tolerances and
   /// first trial step options.dt, max_steps).
   BatchedOdeSolver(const System& system, const OdeOptions& options)
@@ -125,8 +150,8 @@ class BatchedOdeSolver {
   /// without it memory does not grow with the steps (enough for BackwardContinuous).
   /// Throws diffdyn::Error for wrong sizes or times, diffdyn::NumericalError for
   /// step-size underflow, non-finite states or more than max_steps steps.
-  IntegrationStats Forward(const Eigen::Ref<const Eigen::MatrixXd>& z0,
-                           const std::vector<double>& times, std::vector<Eigen::MatrixXd>* outputs,
+  IntegrationStats Forward(const Eigen::Ref<const Matrix>& z0,
+                           const std::vector<double>& times, std::vector<Matrix>* outputs,
                            bool record_tape = true) {
     const int n = system_.state_size();
     DIFFDYN_CHECK(z0.rows() == n, "BatchedOdeSolver::Forward: z0 has ", z0.rows(),
@@ -167,8 +192,7 @@ class BatchedOdeSolver {
   /// Discrete adjoint of the last Forward (recorded with record_tape): from dl_dz
   /// (times.size() entries of n x B, dL/dz(times[i]); an empty matrix means zero) to
   /// dl_dz0 (n x B) and dl_dtheta (p), both overwritten. Exact for the discrete map.
-  void BackwardDiscrete(const std::vector<Eigen::MatrixXd>& dl_dz, Eigen::MatrixXd* dl_dz0,
-                        Eigen::VectorXd* dl_dtheta) {
+  void BackwardDiscrete(const std::vector<Matrix>& dl_dz, Matrix* dl_dz0, Vector* dl_dtheta) {
     DIFFDYN_CHECK(forward_done_ && record_, "BackwardDiscrete needs a Forward with record_tape");
     CheckLossGradients(dl_dz);
     adjoint_.setZero();
@@ -186,27 +210,25 @@ class BatchedOdeSolver {
   /// Continuous adjoint of the last Forward (tape not needed): integrates the augmented
   /// adjoint ODE from times.back() to times[0] with `backward` (any method and
   /// tolerances). dl_dz, dl_dz0 and dl_dtheta as BackwardDiscrete.
-  IntegrationStats BackwardContinuous(const std::vector<Eigen::MatrixXd>& dl_dz,
-                                      const OdeOptions& backward, Eigen::MatrixXd* dl_dz0,
-                                      Eigen::VectorXd* dl_dtheta) {
+  IntegrationStats BackwardContinuous(const std::vector<Matrix>& dl_dz, const OdeOptions& backward,
+                                      Matrix* dl_dz0, Vector* dl_dtheta) {
     DIFFDYN_CHECK(forward_done_, "BackwardContinuous needs a Forward first");
     CheckLossGradients(dl_dz);
     const Eigen::Index nb = static_cast<Eigen::Index>(system_.state_size()) * batch_;
     const int p = system_.num_params();
     // Augmented flat state [z, a, g]: 2 n B + p entries.
     augmented_.resize(2 * nb + p);
-    Eigen::Map<Eigen::MatrixXd>(augmented_.data(), system_.state_size(), batch_) = final_state_;
+    Eigen::Map<Matrix>(augmented_.data(), system_.state_size(), batch_) = final_state_;
     augmented_.segment(nb, nb + p).setZero();
     std::vector<double> reversed(times_.rbegin(), times_.rend());
     const int last = static_cast<int>(times_.size()) - 1;
     const AugmentedSystem augmented{this};
     const IntegrationStats stats = IntegrateTimes(
-        augmented, augmented_, reversed, backward, [&](int k, double, Eigen::VectorXd& x) {
-          const Eigen::MatrixXd& g = dl_dz[last - k];
+        augmented, augmented_, reversed, backward, [&](int k, double, Vector& x) {
+          const Matrix& g = dl_dz[last - k];
           if (g.size() > 0) x.segment(nb, nb) += g.reshaped();
         });
-    *dl_dz0 = Eigen::Map<const Eigen::MatrixXd>(augmented_.data() + nb, system_.state_size(),
-                                                batch_);
+    *dl_dz0 = Eigen::Map<const Matrix>(augmented_.data() + nb, system_.state_size(), batch_);
     *dl_dtheta = augmented_.tail(p);
     return stats;
   }
@@ -224,14 +246,14 @@ class BatchedOdeSolver {
   // The adjoint ODE as an odeint system on the flat state [z, a, g].
   struct AugmentedSystem {
     BatchedOdeSolver* self;
-    void operator()(const Eigen::VectorXd& x, Eigen::VectorXd& dxdt, double t) const {
+    void operator()(const Vector& x, Vector& dxdt, double t) const {
       const int n = self->system_.state_size();
       const int b = self->batch_;
       const Eigen::Index nb = static_cast<Eigen::Index>(n) * b;
-      const Eigen::Map<const Eigen::MatrixXd> z(x.data(), n, b);
-      const Eigen::Map<const Eigen::MatrixXd> a(x.data() + nb, n, b);
-      Eigen::Map<Eigen::MatrixXd> dz(dxdt.data(), n, b);
-      Eigen::Map<Eigen::MatrixXd> da(dxdt.data() + nb, n, b);
+      const Eigen::Map<const Matrix> z(x.data(), n, b);
+      const Eigen::Map<const Matrix> a(x.data() + nb, n, b);
+      Eigen::Map<Matrix> dz(dxdt.data(), n, b);
+      Eigen::Map<Matrix> da(dxdt.data() + nb, n, b);
       auto dg = dxdt.tail(self->system_.num_params());
       self->system_.Eval(z, t, dz, *self->workspace_);
       dg.setZero();
@@ -256,7 +278,7 @@ class BatchedOdeSolver {
     tape_capacity_steps_ = 0;
   }
 
-  void CheckFinite(const Eigen::MatrixXd& z, double t) const {
+  void CheckFinite(const Matrix& z, double t) const {
     if (z.allFinite()) return;
     for (Eigen::Index b = 0; b < z.cols(); ++b) {
       for (Eigen::Index i = 0; i < z.rows(); ++i) {
@@ -268,7 +290,7 @@ class BatchedOdeSolver {
     }
   }
 
-  void CheckLossGradients(const std::vector<Eigen::MatrixXd>& dl_dz) const {
+  void CheckLossGradients(const std::vector<Matrix>& dl_dz) const {
     DIFFDYN_CHECK(dl_dz.size() == times_.size(), "adjoint: ", dl_dz.size(),
                   " loss gradients for ", times_.size(), " output times");
     for (size_t i = 0; i < dl_dz.size(); ++i) {
@@ -280,7 +302,7 @@ class BatchedOdeSolver {
   }
 
   // Stage inputs of `step` live at tape_[step * stages + i].
-  Eigen::MatrixXd& TapeSlot(int step, int stage) {
+  Matrix& TapeSlot(int step, int stage) {
     return tape_[static_cast<size_t>(step) * tableau_.stages + stage];
   }
 
@@ -292,19 +314,19 @@ class BatchedOdeSolver {
       if (i == 0 && have_k0) continue;
       stage_in_ = z_;
       for (int j = 0; j < i; ++j) {
-        if (tableau_.a[i][j] != 0.0) stage_in_.noalias() += (h * tableau_.a[i][j]) * k_[j];
+        if (tableau_.a[i][j] != 0.0) stage_in_.noalias() += Scalar(h * tableau_.a[i][j]) * k_[j];
       }
       system_.Eval(stage_in_, t + tableau_.c[i] * h, k_[i], *workspace_);
     }
     z_new_ = z_;
     for (int i = 0; i < s; ++i) {
-      if (tableau_.b[i] != 0.0) z_new_.noalias() += (h * tableau_.b[i]) * k_[i];
+      if (tableau_.b[i] != 0.0) z_new_.noalias() += Scalar(h * tableau_.b[i]) * k_[i];
     }
     if (tableau_.adaptive) {
       err_.setZero();
       for (int i = 0; i < s; ++i) {
         const double e = tableau_.b[i] - tableau_.b_hat[i];
-        if (e != 0.0) err_.noalias() += (h * e) * k_[i];
+        if (e != 0.0) err_.noalias() += Scalar(h * e) * k_[i];
       }
     }
   }
@@ -323,10 +345,10 @@ class BatchedOdeSolver {
     }
     for (int i = 0; i < s; ++i) {
       if (!needed_[i]) continue;
-      Eigen::MatrixXd& y = TapeSlot(num_steps_, i);
+      Matrix& y = TapeSlot(num_steps_, i);
       y = z_;
       for (int j = 0; j < i; ++j) {
-        if (tableau_.a[i][j] != 0.0) y.noalias() += (h * tableau_.a[i][j]) * k_[j];
+        if (tableau_.a[i][j] != 0.0) y.noalias() += Scalar(h * tableau_.a[i][j]) * k_[j];
       }
     }
   }
@@ -360,11 +382,7 @@ class BatchedOdeSolver {
       const double h = clipped ? t1 - t : dt_;
       TakeStep(t, h, fsal && have_k0_);
       if (fsal) have_k0_ = true;
-      const double ratio = std::sqrt(
-          (err_.array() / (options_.abs_tol +
-                           options_.rel_tol * z_.array().abs().max(z_new_.array().abs())))
-              .square()
-              .mean());
+      const double ratio = ErrorRatio();
       const double factor =
           ratio == 0.0 ? 10.0 : std::clamp(0.9 * std::pow(ratio, exponent), 0.2, 10.0);
       if (ratio <= 1.0) {
@@ -385,27 +403,35 @@ class BatchedOdeSolver {
     }
   }
 
+  // |err| / (abs_tol + rel_tol max(|z|, |z'|)) entry by entry, in double.
+  auto ScaledError() const {
+    const auto z = z_.array().template cast<double>().abs();
+    const auto z_new = z_new_.array().template cast<double>().abs();
+    return err_.array().template cast<double>().abs() / (options_.abs_tol + options_.rel_tol * z.max(z_new));
+  }
+
+  // The RMS of the scaled error over all n x B entries (accepted when <= 1).
+  double ErrorRatio() const { return std::sqrt(ScaledError().square().mean()); }
+
   [[noreturn]] void ThrowUnderflow(double t, double h) const {
-    const Eigen::ArrayXXd scaled =
-        err_.array().abs() /
-        (options_.abs_tol + options_.rel_tol * z_.array().abs().max(z_new_.array().abs()));
+    const Eigen::ArrayXXd scaled = ScaledError();
     Eigen::Index row = 0, col = 0;
     scaled.maxCoeff(&row, &col);
     throw NumericalError(StrCat("step size underflow at t = ", t, " (dt = ", h,
                                 "): largest error in state entry ", row, " of sample ", col,
-                                " = ", z_(row, col)));
+                                " = ", static_cast<double>(z_(row, col))));
   }
 
   // adjoint_ <- dL/dz_step from dL/dz_{step+1}; accumulates dL/dtheta.
-  void StepVjp(int step, Eigen::VectorXd* dl_dtheta) {
+  void StepVjp(int step, Vector* dl_dtheta) {
     const int s = tableau_.stages;
     const double t = step_t_[step];
     const double h = step_h_[step];
     for (int i = s - 1; i >= 0; --i) {
       if (!needed_[i]) continue;
-      kbar_ = (h * tableau_.b[i]) * adjoint_;
+      kbar_ = Scalar(h * tableau_.b[i]) * adjoint_;
       for (int j = i + 1; j < s; ++j) {
-        if (needed_[j] && tableau_.a[j][i] != 0.0) kbar_.noalias() += (h * tableau_.a[j][i]) * w_[j];
+        if (needed_[j] && tableau_.a[j][i] != 0.0) kbar_.noalias() += Scalar(h * tableau_.a[j][i]) * w_[j];
       }
       system_.Vjp(TapeSlot(step, i), t + tableau_.c[i] * h, kbar_, w_[i], *dl_dtheta,
                   *workspace_);
@@ -422,22 +448,22 @@ class BatchedOdeSolver {
   int batch_ = -1;
   std::optional<typename System::Workspace> workspace_;
   // Forward state, stage derivatives, stage input, error estimate.
-  Eigen::MatrixXd z_, z_new_, err_, stage_in_, final_state_;
-  std::array<Eigen::MatrixXd, kMaxStages> k_;
+  Matrix z_, z_new_, err_, stage_in_, final_state_;
+  std::array<Matrix, kMaxStages> k_;
   double dt_ = 0.0;
   bool have_k0_ = false;
   // Tape: steps, output boundaries, stage inputs.
   std::vector<double> times_, step_t_, step_h_;
   std::vector<int> output_steps_;
-  std::vector<Eigen::MatrixXd> tape_;
+  std::vector<Matrix> tape_;
   int tape_capacity_steps_ = 0;
   int num_steps_ = 0;
   bool record_ = false;
   bool forward_done_ = false;
   // Backward buffers.
-  Eigen::MatrixXd adjoint_, kbar_;
-  std::array<Eigen::MatrixXd, kMaxStages> w_;
-  Eigen::VectorXd augmented_;
+  Matrix adjoint_, kbar_;
+  std::array<Matrix, kMaxStages> w_;
+  Vector augmented_;
 };
 
 }  // namespace diffdyn

@@ -42,6 +42,9 @@ namespace diffdyn {
 /// Column vector of T of run-time size.
 template <typename T>
 using VectorX = Eigen::Matrix<T, Eigen::Dynamic, 1>;
+/// A dynamic-size matrix of scalar T.
+template <typename T>
+using MatrixX = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>;
 
 /// Jet with K derivative parts.
 template <int K>

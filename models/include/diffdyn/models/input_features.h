@@ -103,9 +103,9 @@ struct InputFeatures {
     });
   }
 
-  /// z (size(n) x B; resized) of inputs x (n x B).
-  template <typename X>
-  void Encode(const X& x, Eigen::MatrixXd* z) const {
+  /// z (size(n) x B; resized) of inputs x (n x B), float or double (z's scalar is x's).
+  template <typename X, typename Z>
+  void Encode(const X& x, Z* z) const {
     const int n = static_cast<int>(x.rows());
     z->resize(size(n), x.cols());
     ForEachInput(n, [&](int i, int f, bool p) {
@@ -125,10 +125,12 @@ struct InputFeatures {
 
   /// p = D^T diag(s) g (n x B; resized) from g (size(n) x B) at inputs x (n x B),
   /// s = `row_scale` (size(n)) or ones when empty: a gradient dV/dz taken to dV/dx.
-  template <typename X, typename G>
-  void PullBack(const X& x, const G& g, Eigen::MatrixXd* p, const Eigen::VectorXd& row_scale = {}) const {
+  /// x, g and p share one scalar, float or double.
+  template <typename X, typename G, typename P>
+  void PullBack(const X& x, const G& g, P* p, const Eigen::VectorXd& row_scale = {}) const {
+    using S = typename P::Scalar;
     const int n = static_cast<int>(x.rows());
-    const auto s = [&](int f) { return row_scale.size() > 0 ? row_scale[f] : 1.0; };
+    const auto s = [&](int f) { return S(row_scale.size() > 0 ? row_scale[f] : 1.0); };
     p->resize(n, x.cols());
     ForEachInput(n, [&](int i, int f, bool per) {
       if (per) {

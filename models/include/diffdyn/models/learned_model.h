@@ -220,15 +220,20 @@ class FeatureMap {
   /// f, the number of features.
   int features() const { return features_; }
 
-  /// f = phi(z) for a batch: z (n + m) x B, f (f x B; resized).
-  void Apply(const Eigen::Ref<const Eigen::MatrixXd>& z, Eigen::MatrixXd& f) const {
+  /// f = phi(z) for a batch: z (n + m) x B, f (f x B; resized); float or double, f's
+  /// scalar that of z.
+  template <typename DZ, typename F>
+  void Apply(const Eigen::MatrixBase<DZ>& z, F& f) const {
+    using S = typename F::Scalar;
     angles_.Encode(z, &f);
-    if (shift_.size() > 0) f = (f.colwise() - shift_).array().colwise() * inv_scale_.array();
+    if (shift_.size() > 0) {
+      f = (f.colwise() - shift_.cast<S>()).array().colwise() * inv_scale_.cast<S>().array();
+    }
   }
 
   /// g_z = (dphi/dz)^T g_f at z, per column: g_z (n + m) x B (resized), g_f f x B.
-  void Vjp(const Eigen::Ref<const Eigen::MatrixXd>& z, const Eigen::Ref<const Eigen::MatrixXd>& g_f,
-           Eigen::MatrixXd& g_z) const {
+  template <typename DZ, typename DG, typename G>
+  void Vjp(const Eigen::MatrixBase<DZ>& z, const Eigen::MatrixBase<DG>& g_f, G& g_z) const {
     angles_.PullBack(z, g_f, &g_z, inv_scale_);
   }
 
@@ -256,15 +261,22 @@ class OutputMap {
   /// Whether the map is the identity.
   bool identity() const { return scale_.size() == 0; }
 
-  /// y = shift + scale * y for a batch (rows: the network's outputs), in place.
-  void Apply(Eigen::Ref<Eigen::MatrixXd> y) const {
+  /// y = shift + scale * y for a batch (rows: the network's outputs), in place; float or
+  /// double (a block or Ref may be passed as a temporary).
+  template <typename D>
+  void Apply(const Eigen::MatrixBase<D>& y_out) const {
+    using S = typename D::Scalar;
     if (identity()) return;
-    y = (y.array().colwise() * scale_.array()).colwise() + shift_.array();
+    auto& y = y_out.const_cast_derived();
+    y = (y.array().colwise() * scale_.cast<S>().array()).colwise() + shift_.cast<S>().array();
   }
 
   /// g = scale * g in place: the cotangent of the MLP's output from that of the map's.
-  void Pullback(Eigen::Ref<Eigen::MatrixXd> g) const {
-    if (!identity()) g = g.array().colwise() * scale_.array();
+  template <typename D>
+  void Pullback(const Eigen::MatrixBase<D>& g_out) const {
+    using S = typename D::Scalar;
+    auto& g = g_out.const_cast_derived();
+    if (!identity()) g = g.array().colwise() * scale_.cast<S>().array();
   }
 
   /// The map for one sample on any scalar.
@@ -284,9 +296,10 @@ class OutputMap {
 /// MLP workspace of B samples holds about 8 B (2 sum_l n_l + 2 w) bytes, w the widest
 /// layer: ~1.3 MB for h = 100, B = 250); later Evals are not kept and their Vjps
 /// recompute.
-struct MlpForwardCache {
-  std::vector<Eigen::MatrixXd> inputs;
-  std::vector<MlpWorkspace> workspaces;
+template <typename S>
+struct BasicMlpForwardCache {
+  std::vector<MatrixX<S>> inputs;
+  std::vector<BasicMlpWorkspace<S>> workspaces;
   int count = 0;
   bool recording = false;
   double budget_bytes = 192e6;
@@ -294,7 +307,7 @@ struct MlpForwardCache {
   /// Entries that fit the budget for batches of `batch` samples of `arch`.
   int Capacity(const MlpArchitecture& arch, int batch) const {
     const double sum = std::accumulate(arch.sizes.begin(), arch.sizes.end(), 0.0);
-    const double bytes = 8.0 * batch * (2 * sum + 2.0 * arch.max_width());
+    const double bytes = static_cast<double>(sizeof(S)) * batch * (2 * sum + 2.0 * arch.max_width());
     return static_cast<int>(std::min(64.0, budget_bytes / std::max(bytes, 1.0)));
   }
 
@@ -305,23 +318,30 @@ struct MlpForwardCache {
   }
 };
 
+/// The forward cache of double networks.
+using MlpForwardCache = BasicMlpForwardCache<double>;
+
 /// dz/dt = M(phi(z)) for a batch (n + m rows, one sample per column): the NeuralODE's
-/// vector field as a BatchedVjpSystem (adjoint.h). `net` and `features` point at the
+/// vector field as a BatchedVjpSystem (adjoint.h) on matrices of S (float or double). `net` and `features` point at the
 /// model's MLP and feature map and are re-pointed before every use (the model may
 /// have moved). With a `cache`,
 /// Evals of a taped solve keep their activations and the Vjp at the same stage input
 /// (the solver's backward pass visits stages in reverse order) reuses them instead of
 /// a second forward pass; a Vjp at an input not near the top of the cache recomputes.
-struct MlpOdeSystem {
-  const Mlp<double>* net = nullptr;
+template <typename S>
+struct BasicMlpOdeSystem {
+  /// The scalar of the batched matrices (BatchedVjpSystem).
+  using Scalar = S;
+  using Matrix = MatrixX<S>;
+  const Mlp<S>* net = nullptr;
   const FeatureMap* features = nullptr;
   const OutputMap* output = nullptr;
-  MlpForwardCache* cache = nullptr;
+  BasicMlpForwardCache<S>* cache = nullptr;
 
   /// Buffers for one batch: the MLP's workspace plus input / output / gradient copies.
   struct Workspace {
-    MlpWorkspace mlp;
-    Eigen::MatrixXd input, output, grad_input, grad_features, lambda;
+    BasicMlpWorkspace<S> mlp;
+    Matrix input, output, grad_input, grad_features, lambda;
   };
 
   /// n + m, the ODE state's size (the MLP's output size).
@@ -331,12 +351,11 @@ struct MlpOdeSystem {
   /// Workspace for batches of `batch` samples (one MLP chunk per batch, no Jacobians).
   Workspace MakeWorkspace(int batch) const {
     Workspace ws;
-    ws.mlp = MlpWorkspace(net->architecture(), batch, std::max(batch, 1), /*jacobian=*/false);
+    ws.mlp = BasicMlpWorkspace<S>(net->architecture(), batch, std::max(batch, 1), /*jacobian=*/false);
     return ws;
   }
   /// dzdt = M(phi(z)), z and dzdt (n + m) x B.
-  void Eval(const Eigen::Ref<const Eigen::MatrixXd>& z, double, Eigen::Ref<Eigen::MatrixXd> dzdt,
-            Workspace& ws) const {
+  void Eval(const Eigen::Ref<const Matrix>& z, double, Eigen::Ref<Matrix> dzdt, Workspace& ws) const {
     const bool encoded = features != nullptr && !features->identity();
     if (cache && cache->recording &&
         cache->count < cache->Capacity(net->architecture(), static_cast<int>(z.cols()))) {
@@ -367,17 +386,16 @@ struct MlpOdeSystem {
   /// sum_b (dM/dtheta)^T lambda_b. Reuses a cached forward pass at exactly this input
   /// (searching down from the most recent entry and dropping the ones above it:
   /// rejected or unneeded stages), else recomputes.
-  void Vjp(const Eigen::Ref<const Eigen::MatrixXd>& z, double,
-           const Eigen::Ref<const Eigen::MatrixXd>& lambda, Eigen::Ref<Eigen::MatrixXd> vjp_z,
-           Eigen::Ref<Eigen::VectorXd> grad_theta, Workspace& ws) const {
+  void Vjp(const Eigen::Ref<const Matrix>& z, double, const Eigen::Ref<const Matrix>& lambda,
+           Eigen::Ref<Matrix> vjp_z, Eigen::Ref<VectorX<S>> grad_theta, Workspace& ws) const {
     constexpr int kSearch = 8;
     const bool encoded = features != nullptr && !features->identity();
     if (encoded) features->Apply(z, ws.input);
     const auto cached_at = [&](int k) {
-      const Eigen::MatrixXd& in = cache->inputs[k];
+      const Matrix& in = cache->inputs[k];
       return in.cols() == z.cols() && (encoded ? in == ws.input : in == z);
     };
-    MlpWorkspace* forward = nullptr;
+    BasicMlpWorkspace<S>* forward = nullptr;
     if (cache) {
       for (int k = cache->count - 1; k >= std::max(0, cache->count - kSearch); --k) {
         if (cached_at(k)) {
@@ -412,6 +430,9 @@ struct MlpOdeSystem {
     }
   }
 };
+
+/// The NeuralODE field of double networks.
+using MlpOdeSystem = BasicMlpOdeSystem<double>;
 
 /// One-sample vector field for odeint on any scalar: dz/dt = M(phi(z)) with an Mlp<P>.
 template <typename P>

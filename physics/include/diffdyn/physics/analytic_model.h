@@ -47,16 +47,12 @@
 
 #include "diffdyn/autodiff_ode/spd_solve.h"
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/autodiff_ode/jacobian.h"  // VectorX<T>
+#include "diffdyn/autodiff_ode/jacobian.h"  // VectorX<T>, MatrixX<T>
 #include "diffdyn/models/continuous_model.h"
 #include "diffdyn/models/json_io.h"
 #include "diffdyn/models/system_description.h"
 
 namespace diffdyn {
-
-/// Dynamic-size matrix of scalar T.
-template <typename T>
-using MatrixX = Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>;
 
 /// A fixed-size vector of N joint quantities of scalar T (the models' torques).
 template <typename T, int N>
