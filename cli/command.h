@@ -15,10 +15,13 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
 #include <string>
 
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
+
+#include "diffdyn/models/precision.h"
 
 namespace diffdyn {
 class SweepQueue;  // solvers/sweep.h
@@ -48,6 +51,14 @@ CLI::Validator OutputPath(bool folder = false);
 /// Throws diffdyn::Error if `output` (the value of option `output_option`) names
 /// the same file as `input`: no command overwrites its own input.
 void CheckDistinct(const std::string& input, const std::string& output_option, const std::string& output);
+
+/// Adds --precision (f32 or f64; empty: the model file's own) to `command`, bound to
+/// `value`.
+void AddPrecisionOption(CLI::App* command, std::string& value);
+
+/// The precision a --precision value names; nullopt when it is empty. Throws
+/// diffdyn::Error naming --precision for another value.
+std::optional<Precision> PrecisionOption(const std::string& value);
 
 /// Adds --seed, --json and --quiet to `command`, bound to `options`.
 void AddCommonOptions(CLI::App* command, CommonOptions& options);

@@ -65,6 +65,7 @@ struct ControlCommandOptions {
   std::string system = "pendulum";
   std::string controller = "mppi";
   std::string model;
+  std::string precision;
   int starts = 20;
   double dt = 0.04;
   MppiControlOptions mppi;
@@ -76,9 +77,14 @@ struct ControlCommandOptions {
 std::unique_ptr<TransitionModel> PlanningModel(const ControlCommandOptions& o, const ControlTask& task) {
   DIFFDYN_CHECK(o.dt > 0 && o.dt <= 1.0, "--dt must be in (0, 1] s, got ", o.dt);
   PeriodsPerStep(o.dt, task.period, "--dt");
-  if (o.model.empty() || o.model == o.system) return TaskModel(task, o.dt, 1);
+  if (o.model.empty() || o.model == o.system) {
+    DIFFDYN_CHECK(PrecisionOption(o.precision).value_or(Precision::kF64) == Precision::kF64, "--precision ",
+                  o.precision, ": the task's own model computes in float64 only (float32: a learned --model)");
+    return TaskModel(task, o.dt, 1);
+  }
   return LoadTransitionModel(o.model, {.dt = o.dt, .method = Method::kRk4Classic, .substeps = 1,
-                                       .actuated = TaskActuatedJoints(task)});
+                                       .actuated = TaskActuatedJoints(task),
+                                       .precision = PrecisionOption(o.precision)});
 }
 
 void WriteStarts(const fs::path& path, const std::vector<ControlRun>& runs) {
@@ -204,12 +210,15 @@ Planner PushingPlanner(const ControlCommandOptions& o, const PushingTask& task) 
   DIFFDYN_CHECK(o.controller == "mppi", "--controller ", o.controller, ": the pushing task takes mppi only");
   Planner p;
   p.model = LoadTransitionModel(o.model.empty() || o.model == o.system ? "oracle" : o.model,
-                                {.world = task.world()});
+                                {.world = task.world(), .precision = PrecisionOption(o.precision)});
   p.controller = std::make_unique<PushingMppiController>(task, *p.model);
   return p;
 }
 
 void RunControl(const ControlCommandOptions& o) {
+  PrecisionOption(o.precision);  // a bad value is bad input whatever the controller
+  DIFFDYN_CHECK(o.precision.empty() || o.controller == "mppi", "--precision: applies to --controller mppi ",
+                "(the model it plans with), not ", o.controller);
   // Validate everything before anything is written.
   DIFFDYN_CHECK(o.starts >= 1 && o.starts <= 100000, "--starts must be in [1, 100000], got ", o.starts);
   DIFFDYN_CHECK(o.system == "pushing" || o.system == "pendulum" || o.system == "cartpole", "--system ",
@@ -282,6 +291,7 @@ void RegisterControlCommand(CLI::App& app) {
   command->add_option("--model", o->model,
                       "Model to plan with: a model file, or the task's system name (default: the task's analytic model); "
                       "for hjb the value-function file");
+  AddPrecisionOption(command, o->precision);
   command->add_option("--starts", o->starts, "Seeded start states, 1 to 100000")
       ->check(Bounded(1, 100000))->capture_default_str();
   command->add_option("--dt", o->dt, "Planning step (s) of analytic and extended-physics models, a multiple of 8 ms")

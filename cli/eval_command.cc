@@ -82,6 +82,7 @@ void RegisterEvalCommand(CLI::App& app) {
       ->capture_default_str();
   command->add_option("--threads", o->request.threads, "Threads (0: all cores)")
       ->check(Bounded(0, 256));
+  AddPrecisionOption(command, o->request.precision);
   command->callback([o] { RunEval(*o); });
 }
 

@@ -30,9 +30,11 @@
 
 namespace diffdyn::cli {
 
-std::unique_ptr<TransitionModel> LoadPushModel(const std::string& name, const PushingConfig& world) {
+std::unique_ptr<TransitionModel> LoadPushModel(const std::string& name, const PushingConfig& world,
+                                               std::optional<Precision> precision) {
   LoadModelOptions options;
   options.world = world;
+  options.precision = precision;
   auto model = LoadTransitionModel(name, options);
   DIFFDYN_CHECK(model->state_size() == 3 && model->action_size() == 3, "--model ", name,
                 ": a pushing model has 3 states and 3 actions, this one has ", model->state_size(),
@@ -96,6 +98,7 @@ namespace {
 struct PushArgs {
   CommonOptions common;
   std::string model;
+  std::string precision;
   int trials = 20;
   bool obstacle = true;
   int samples = 1000;
@@ -131,7 +134,7 @@ void RunPush(const PushArgs& args) {
   options.world.obstacle = args.obstacle;
   DIFFDYN_CHECK(args.trials >= 1, "--trials: must be >= 1, got ", args.trials);
   ValidatePushTaskOptions(options);
-  const std::unique_ptr<TransitionModel> model = LoadPushModel(args.model, options.world);
+  const std::unique_ptr<TransitionModel> model = LoadPushModel(args.model, options.world, PrecisionOption(args.precision));
   namespace fs = std::filesystem;
   if (!args.out.empty()) {
     std::error_code ec;
@@ -215,6 +218,7 @@ void RegisterPushCommand(CLI::App& app) {
   AddCommonOptions(command, args->common);
   command->add_option("--model", args->model, "Pushing model file, or 'oracle' (the ODE world)")
       ->required();
+  AddPrecisionOption(command, args->precision);
   command->add_option("--trials", args->trials, "Seeded trials (start perturbed per trial)")
       ->check(Bounded(1, 10000));
   command->add_flag("--obstacle,!--free", args->obstacle,

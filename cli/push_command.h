@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "diffdyn/models/transition_model.h"
@@ -15,7 +16,8 @@ namespace diffdyn::cli {
 
 /// A pushing model file, or `oracle` (the ODE world `world` as the model).
 /// Throws diffdyn::Error naming --model for a missing or bad file.
-std::unique_ptr<TransitionModel> LoadPushModel(const std::string& name, const PushingConfig& world);
+std::unique_ptr<TransitionModel> LoadPushModel(const std::string& name, const PushingConfig& world,
+                                               std::optional<Precision> precision = std::nullopt);
 
 /// trial,step,x,y,theta,push_location,push_angle,push_length,outcome,pred_x,pred_y,
 /// pred_theta: one row per pose, the last pose of a trial without an action; pred_*

@@ -47,6 +47,17 @@ std::string Quote(const std::string& text) {
 
 }  // namespace
 
+void AddPrecisionOption(CLI::App* command, std::string& value) {
+  command->add_option("--precision", value,
+                      "Compute in f32 or f64 (learned models: abs-nn, res-nn, abs-node, res-node; "
+                      "default: the model file's own)");
+}
+
+std::optional<Precision> PrecisionOption(const std::string& value) {
+  if (value.empty()) return std::nullopt;
+  return ParsePrecision(value, "--precision");
+}
+
 CLI::Validator Bounded(double lo, double hi) {
   const std::string range = fmt::format("[{:g}, {:g}]", lo, hi);
   return CLI::Validator(

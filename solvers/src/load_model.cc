@@ -61,10 +61,8 @@ std::unique_ptr<TransitionModel> DelanTransitionModel(Delan delan, const std::st
       kind);
 }
 
-}  // namespace
-
-std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
-                                                     const LoadModelOptions& options) {
+// The model `spec` names, in the precision its file records (float64 for the others).
+std::unique_ptr<TransitionModel> OpenModel(const std::string& spec, const LoadModelOptions& options) {
   DIFFDYN_CHECK(!spec.empty(), "--model: empty (a model file, an analytic model name or 'oracle')");
   if (spec == "oracle") return std::make_unique<PushingOracle>(options.world);
   for (const std::string& name : AnalyticModelNames()) {
@@ -98,6 +96,19 @@ std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
   throw Error(StrCat("--model ", spec, ": a model of kind '", file.kind,
                      "' is not a dynamics model (expected abs-nn, res-nn, abs-node, res-node, "
                      "extended-physics, delan or delan-friction)"));
+}
+
+}  // namespace
+
+std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
+                                                     const LoadModelOptions& options) {
+  std::unique_ptr<TransitionModel> model = OpenModel(spec, options);
+  if (options.precision && !model->SetPrecision(*options.precision)) {
+    throw Error(StrCat("--precision ", PrecisionName(*options.precision), ": --model ", spec, " is a ",
+                       model->kind(), " model, which computes in float64 only (float32: abs-nn, res-nn, "
+                       "abs-node, res-node)"));
+  }
+  return model;
 }
 
 }  // namespace diffdyn

@@ -26,6 +26,7 @@ std::unique_ptr<TransitionModel> LoadNeuralOdeWithSolver(const EvalRequest& r) {
   LearnedModelConfig config = model.config();
   if (!r.solver.empty()) config.method = ParseMethod(r.solver);
   if (r.steps > 0) config.steps = r.steps;
+  if (!r.precision.empty()) config.precision = ParsePrecision(r.precision);
   config.Validate();
   return std::make_unique<LearnedModel>(config, model.net());
 }
@@ -36,6 +37,7 @@ std::unique_ptr<TransitionModel> LoadModel(const EvalRequest& r, double dt) {
   load.dt = dt;
   load.substeps = r.substeps;
   if (!r.solver.empty()) load.method = ParseMethod(r.solver);
+  if (!r.precision.empty()) load.precision = ParsePrecision(r.precision);
   std::unique_ptr<TransitionModel> model = LoadTransitionModel(r.model, load);
   const bool learned = dynamic_cast<const LearnedModel*>(model.get()) != nullptr;
   if (learned && (!r.solver.empty() || r.steps > 0)) return LoadNeuralOdeWithSolver(r);

@@ -35,6 +35,9 @@ void CheckRequest(const TrainRequest& r) {
                 r.normalize, "' (expected auto, on or off)");
   DIFFDYN_CHECK(r.loss == "single" || r.loss == "multi", "--loss: unknown loss '", r.loss,
                 "' (expected single or multi)");
+  DIFFDYN_CHECK(ParsePrecision(r.precision) == Precision::kF64 || !IsDelanKind(r.model), "--precision ",
+                r.precision, ": a ", r.model,
+                " trains in float64 only (float32: abs-nn, res-nn, abs-node, res-node)");
 }
 
 // The losses and timing a model file records of its training.
@@ -154,6 +157,7 @@ nlohmann::json TrainFiles(const TrainRequest& r) {
   config.method = ParseMethod(r.solver);
   config.steps = r.steps;
   config.hidden = r.hidden.value_or(100);
+  config.precision = ParsePrecision(r.precision);
   config.Validate();
   const int horizon = r.loss == "multi" ? 4 : 1;
   std::vector<int> train_index, val_index;

@@ -58,6 +58,7 @@
 #include <mutex>
 #include <numeric>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -72,6 +73,7 @@
 #include "diffdyn/models/input_features.h"
 #include "diffdyn/models/mlp.h"
 #include "diffdyn/models/model_file.h"
+#include "diffdyn/models/precision.h"
 #include "diffdyn/models/system_description.h"
 #include "diffdyn/models/transition_model.h"
 
@@ -163,6 +165,8 @@ struct LearnedModelConfig {
   SystemDescription system = SystemDescription::Unnamed(3, 3);
   /// Input and output scalings of the network (default: none).
   Scaling scaling{};
+  /// The batched paths' precision (precision.h); parameters stay double.
+  Precision precision = Precision::kF64;
 
   /// Sizes (f, h, h, n) for the NNs, (f, h, h, n + m) for the NeuralODEs, f the
   /// system's feature size; `activation` on both hidden layers.
@@ -518,6 +522,25 @@ inline Scaling FitScaling(const LearnedModelConfig& config, const Eigen::Ref<con
   return scaling;
 }
 
+/// The buffers of a LearnedModel's batched paths in one precision S (double or
+/// float): the MLP's tape (NN kinds), the NeuralODE's field, forward cache, solver
+/// and tape, and [x; u], phi, outputs and gradients as S matrices.
+template <typename S>
+struct LearnedEngine {
+  using Matrix = MatrixX<S>;
+  // float: the model's parameters rounded to float at each Forward / PredictBatch
+  // (the double parameters stay the master copy that optimisers change).
+  Mlp<S> rounded;
+  BasicMlpWorkspace<S> mlp;
+  BasicMlpOdeSystem<S> system;
+  BasicMlpForwardCache<S> cache;
+  std::unique_ptr<BatchedOdeSolver<BasicMlpOdeSystem<S>>> solver;
+  // input = [x; u]; features = phi(input) when angles are encoded (NN kinds).
+  Matrix input, features, output, cotangent, grad_input, grad_z;
+  VectorX<S> grad_params;
+  std::vector<Matrix> outputs, dl_dz;
+};
+
 /// Scratch and tape of one LearnedModel for batches up to a size, one per thread
 /// (and one per rollout step when training through rollouts).
 class LearnedWorkspace : public TransitionWorkspace {
@@ -528,16 +551,17 @@ class LearnedWorkspace : public TransitionWorkspace {
 
  private:
   friend class LearnedModel;
-  // NN: the MLP's tape; NODE: the solver (which references `system`) and its tape.
-  MlpWorkspace mlp;
-  MlpOdeSystem system;
-  MlpForwardCache cache;
-  std::unique_ptr<BatchedOdeSolver<MlpOdeSystem>> solver;
-  // input = [x; u]; features = phi(input) when angles are encoded (NN kinds).
-  Eigen::MatrixXd input, features, output, cotangent, grad_input, grad_z;
-  Eigen::VectorXd grad_params;
+  template <typename S>
+  LearnedEngine<S>& engine() {
+    if constexpr (std::is_same_v<S, float>) {
+      return f32;
+    } else {
+      return f64;
+    }
+  }
+  LearnedEngine<double> f64;
+  LearnedEngine<float> f32;
   std::vector<double> times{0.0, 1.0};
-  std::vector<Eigen::MatrixXd> outputs, dl_dz;
   int batch = 0;
   bool taped = false;
 };
@@ -576,6 +600,14 @@ class LearnedModel final : public DifferentiableTransitionModel {
   std::string kind() const override { return LearnedKindName(config_.type); }
   /// The data's sample interval (s) recorded with the model, or 0.
   double time_step() const override { return time_step_; }
+  /// The precision of the batched paths (PredictBatch, Forward, Backward).
+  Precision precision() const override { return config_.precision; }
+  /// Converts the model to compute in `p` (the parameters stay double; existing
+  /// workspaces serve both precisions); always true.
+  bool SetPrecision(Precision p) override {
+    config_.precision = p;
+    return true;
+  }
   /// Records the sample interval of the training data (s, >= 0, finite).
   void set_time_step(double dt) {
     DIFFDYN_CHECK(dt >= 0 && std::isfinite(dt), "time step must be >= 0 and finite, got ", dt);
@@ -589,7 +621,8 @@ class LearnedModel final : public DifferentiableTransitionModel {
     return ws;
   }
 
-  /// next = F(states, actions): n x B, m x B, n x B (no tape kept).
+  /// next = F(states, actions): n x B, m x B, n x B (no tape kept), computed in the
+  /// configured precision.
   void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
                     const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
                     TransitionWorkspace& ws) const override {
@@ -609,7 +642,8 @@ class LearnedModel final : public DifferentiableTransitionModel {
 
   /// Reverse mode of the last Forward on `ws`: given dl_dnext = dL/dnext (n x B),
   /// adds dL/dtheta to *grad_params (size num_parameters(); may be null) and writes
-  /// dL/dstates (n x B; resized; may be null).
+  /// dL/dstates (n x B; resized; may be null). In float32 the cotangents and the
+  /// per-call parameter gradient are float; the sum into *grad_params is double.
   void Backward(const Eigen::Ref<const Eigen::MatrixXd>& dl_dnext, TransitionWorkspace& ws_base,
                 Eigen::VectorXd* grad_params, Eigen::MatrixXd* dl_dstates) const override {
     LearnedWorkspace& ws = Cast(ws_base);
@@ -621,33 +655,10 @@ class LearnedModel final : public DifferentiableTransitionModel {
     DIFFDYN_CHECK(grad_params == nullptr || grad_params->size() == num_parameters(), kind(),
                   ": gradient vector has ", grad_params ? grad_params->size() : 0, " entries, expected ",
                   num_parameters());
-    const int b = ws.batch;
-    if (IsNeuralOde(config_.type)) {
-      // Adjoint seed dL/dz(1) = [gbar; 0]; dL/dx_t = top rows of dL/dz(0).
-      ws.system.net = &net_;
-      ws.system.features = &features_;
-      ws.system.output = &output_;
-      ws.system.cache = &ws.cache;
-      Eigen::MatrixXd& seed = ws.dl_dz[1];
-      seed.topRows(n) = dl_dnext;
-      seed.bottomRows(action_size()).setZero();
-      ws.solver->BackwardDiscrete(ws.dl_dz, &ws.grad_input, &ws.grad_params);
+    if (config_.precision == Precision::kF32) {
+      BackwardIn<float>(dl_dnext, ws, grad_params, dl_dstates);
     } else {
-      static const Eigen::MatrixXd kNone;
-      ws.cotangent = dl_dnext;
-      output_.Pullback(ws.cotangent);
-      net_.Backward(ws.cotangent, kNone, &ws.grad_params, &ws.grad_input, &ws.mlp);
-      // dL/d[x; u] from dL/dphi.
-      if (!features_.identity()) {
-        features_.Vjp(ws.input, ws.grad_input, ws.grad_z);
-        ws.grad_input.swap(ws.grad_z);
-      }
-    }
-    if (grad_params) *grad_params += ws.grad_params;
-    if (dl_dstates) {
-      if (dl_dstates->rows() != n || dl_dstates->cols() != b) dl_dstates->resize(n, b);
-      *dl_dstates = ws.grad_input.topRows(n);
-      if (IsResidual(config_.type)) *dl_dstates += dl_dnext;
+      BackwardIn<double>(dl_dnext, ws, grad_params, dl_dstates);
     }
   }
 
@@ -679,53 +690,133 @@ class LearnedModel final : public DifferentiableTransitionModel {
     return *p;
   }
 
-  // Sizes the workspace buffers for a batch of b (allocates only when b changes).
-  void Prepare(int b, LearnedWorkspace& ws) const {
-    ws.system.net = &net_;
-    ws.system.features = &features_;
-    ws.system.output = &output_;
-    ws.system.cache = &ws.cache;
+  // The network the batched paths of precision S use: the model's own (double) or
+  // the engine's float copy, rounded from the current parameters when `refresh`.
+  template <typename S>
+  const Mlp<S>& Network(LearnedEngine<S>& e, bool refresh) const {
+    if constexpr (std::is_same_v<S, double>) {
+      return net_;
+    } else {
+      if (refresh) {
+        if (!(e.rounded.architecture() == net_.architecture())) e.rounded = net_.template cast<S>();
+        e.rounded.mutable_parameters() = net_.parameters().template cast<S>();
+      }
+      return e.rounded;
+    }
+  }
+
+  // Points the NeuralODE field of engine `e` at the network, maps and cache.
+  template <typename S>
+  void Attach(LearnedEngine<S>& e, const Mlp<S>& net) const {
+    e.system.net = &net;
+    e.system.features = &features_;
+    e.system.output = &output_;
+    e.system.cache = &e.cache;
+  }
+
+  // Sizes the engine's buffers for a batch of b (allocates only when b changes).
+  template <typename S>
+  void Prepare(int b, LearnedEngine<S>& e, const Mlp<S>& net) const {
+    Attach(e, net);
     if (IsNeuralOde(config_.type)) {
-      if (!ws.solver) {
-        ws.solver = std::make_unique<BatchedOdeSolver<MlpOdeSystem>>(ws.system, config_.ode_options());
+      if (!e.solver) {
+        e.solver = std::make_unique<BatchedOdeSolver<BasicMlpOdeSystem<S>>>(e.system, config_.ode_options());
       }
     } else {
-      ws.mlp.Reserve(net_.architecture(), b, /*jacobian=*/false);
+      e.mlp.Reserve(net.architecture(), b, /*jacobian=*/false);
     }
-    if (ws.batch == b) return;
-    ws.batch = b;
     const int z = state_size() + action_size();
-    ws.input.resize(z, b);
-    ws.dl_dz.assign(2, Eigen::MatrixXd());
-    ws.dl_dz[1].resize(z, b);
+    if (e.input.cols() == b && e.input.rows() == z) return;
+    e.input.resize(z, b);
+    e.dl_dz.assign(2, MatrixX<S>());
+    e.dl_dz[1].resize(z, b);
+  }
+
+  // Sizes a workspace for batches of b in the configured precision.
+  void Prepare(int b, LearnedWorkspace& ws) const {
+    if (config_.precision == Precision::kF32) {
+      Prepare(b, ws.f32, Network(ws.f32, /*refresh=*/true));
+    } else {
+      Prepare(b, ws.f64, Network(ws.f64, /*refresh=*/true));
+    }
+    ws.batch = b;
   }
 
   void Run(const Eigen::Ref<const Eigen::MatrixXd>& states,
            const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
            LearnedWorkspace& ws, bool tape) const {
-    const int b = static_cast<int>(states.cols());
-    Prepare(b, ws);
-    const int n = state_size();
-    ws.input.topRows(n) = states;
-    ws.input.bottomRows(action_size()) = actions;
-    if (IsNeuralOde(config_.type)) {
-      ws.cache.Start(tape);
-      ws.solver->Forward(ws.input, ws.times, &ws.outputs, tape);
-      ws.cache.recording = false;
-      next = ws.outputs[1].topRows(n);
+    if (config_.precision == Precision::kF32) {
+      RunIn<float>(states, actions, next, ws, tape);
     } else {
-      if (!features_.identity()) features_.Apply(ws.input, ws.features);
-      const Eigen::MatrixXd& input = features_.identity() ? ws.input : ws.features;
-      if (tape) {
-        net_.Forward(input, &ws.output, nullptr, &ws.mlp);
-        next = ws.output;
-      } else {
-        net_.Evaluate(input, next, &ws.mlp);
-      }
-      output_.Apply(next);
+      RunIn<double>(states, actions, next, ws, tape);
     }
     if (IsResidual(config_.type)) next += states;
+    ws.batch = static_cast<int>(states.cols());
     ws.taped = tape;
+  }
+
+  // next = F(states, actions) but the residual term, computed in S; [x; u] is rounded
+  // to S on entry and the result widened to double on exit.
+  template <typename S>
+  void RunIn(const Eigen::Ref<const Eigen::MatrixXd>& states, const Eigen::Ref<const Eigen::MatrixXd>& actions,
+             Eigen::Ref<Eigen::MatrixXd> next, LearnedWorkspace& ws, bool tape) const {
+    LearnedEngine<S>& e = ws.engine<S>();
+    const Mlp<S>& net = Network(e, /*refresh=*/true);
+    const int b = static_cast<int>(states.cols());
+    Prepare(b, e, net);
+    const int n = state_size();
+    e.input.topRows(n) = states.template cast<S>();
+    e.input.bottomRows(action_size()) = actions.template cast<S>();
+    if (IsNeuralOde(config_.type)) {
+      e.cache.Start(tape);
+      e.solver->Forward(e.input, ws.times, &e.outputs, tape);
+      e.cache.recording = false;
+      next = e.outputs[1].topRows(n).template cast<double>();
+      return;
+    }
+    if (!features_.identity()) features_.Apply(e.input, e.features);
+    const MatrixX<S>& input = features_.identity() ? e.input : e.features;
+    if (tape) {
+      net.Forward(input, &e.output, nullptr, &e.mlp);
+    } else {
+      if (e.output.rows() != n || e.output.cols() != b) e.output.resize(n, b);
+      net.Evaluate(input, e.output, &e.mlp);
+    }
+    output_.Apply(e.output);
+    next = e.output.template cast<double>();
+  }
+
+  // Backward in precision S (see Backward).
+  template <typename S>
+  void BackwardIn(const Eigen::Ref<const Eigen::MatrixXd>& dl_dnext, LearnedWorkspace& ws,
+                  Eigen::VectorXd* grad_params, Eigen::MatrixXd* dl_dstates) const {
+    LearnedEngine<S>& e = ws.engine<S>();
+    const Mlp<S>& net = Network(e, /*refresh=*/false);  // the network of the Forward
+    const int n = state_size(), b = ws.batch;
+    if (IsNeuralOde(config_.type)) {
+      // Adjoint seed dL/dz(1) = [gbar; 0]; dL/dx_t = top rows of dL/dz(0).
+      Attach(e, net);
+      MatrixX<S>& seed = e.dl_dz[1];
+      seed.topRows(n) = dl_dnext.template cast<S>();
+      seed.bottomRows(action_size()).setZero();
+      e.solver->BackwardDiscrete(e.dl_dz, &e.grad_input, &e.grad_params);
+    } else {
+      static const MatrixX<S> kNone;
+      e.cotangent = dl_dnext.template cast<S>();
+      output_.Pullback(e.cotangent);
+      net.Backward(e.cotangent, kNone, &e.grad_params, &e.grad_input, &e.mlp);
+      // dL/d[x; u] from dL/dphi.
+      if (!features_.identity()) {
+        features_.Vjp(e.input, e.grad_input, e.grad_z);
+        e.grad_input.swap(e.grad_z);
+      }
+    }
+    if (grad_params) *grad_params += e.grad_params.template cast<double>();
+    if (dl_dstates) {
+      if (dl_dstates->rows() != n || dl_dstates->cols() != b) dl_dstates->resize(n, b);
+      *dl_dstates = e.grad_input.topRows(n).template cast<double>();
+      if (IsResidual(config_.type)) *dl_dstates += dl_dnext;
+    }
   }
 
   LearnedModelConfig config_;
@@ -829,7 +920,7 @@ inline void SaveLearnedModel(const std::filesystem::path& path, const LearnedMod
   RegisterLearnedModelKinds();
   SaveModelFile(path, ModelFile{model.kind(), LearnedArchitectureToJson(model.config()),
                                 model.parameters(), provenance, metrics,
-                                SystemToJson(model.system())});
+                                SystemToJson(model.system()), model.config().precision});
 }
 
 /// Loads a learned model file; throws diffdyn::Error with one line naming the path
@@ -848,6 +939,7 @@ inline LearnedModel LoadLearnedModel(const std::filesystem::path& path,
   } catch (const Error& e) {
     throw Error(StrCat(path.string(), ": ", e.what()));
   }
+  config.precision = file.precision;
   LearnedModel model(config, Mlp<double>(config.Architecture(), file.parameters));
   // The training data's sample interval, where the file records it (diffdyn train does).
   const nlohmann::json& dt = file.provenance.contains("dt") ? file.provenance["dt"] : nlohmann::json();

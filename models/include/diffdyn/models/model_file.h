@@ -10,8 +10,10 @@
 //     "parameters": {"count": P, "values": [theta_0, ..., theta_{P-1}]},
 //     "provenance": { ... },               // who made it, from what data, seed, ...
 //     "metrics": { ... },                  // losses and errors measured on it
-//     "system": { ... }                    // optional: the states and actions
-//   }                                      // (system_description.h)
+//     "system": { ... },                   // optional: the states and actions
+//                                          // (system_description.h)
+//     "precision": "f64"                   // or "f32": what the batched paths compute
+//   }                                      // in (precision.h); absent reads as "f64"
 //
 // Parameters are the model's ONE flat vector theta, written with the shortest
 // decimal form that reads back to the same double (bit-exact round trip).
@@ -49,6 +51,7 @@
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/models/io.h"
 #include "diffdyn/models/mlp.h"
+#include "diffdyn/models/precision.h"
 #include "diffdyn/models/system_description.h"
 
 namespace diffdyn {
@@ -70,6 +73,8 @@ struct ModelFile {
   nlohmann::json metrics = nlohmann::json::object();
   /// The system's description (SystemToJson), or null where the kind has none.
   nlohmann::json system = nullptr;
+  /// The precision the model computes in (parameters are written in double).
+  Precision precision = Precision::kF64;
 };
 
 /// Checks a kind's architecture object and returns its parameter count; throws
@@ -181,6 +186,14 @@ inline ModelFile ModelFileFromJson(const nlohmann::json& j, const std::string& n
     }
     file.system = j["system"];
   }
+  if (j.contains("precision")) {
+    if (!j["precision"].is_string()) fail("'precision' must be \"f32\" or \"f64\"");
+    try {
+      file.precision = ParsePrecision(j["precision"].get<std::string>(), "precision");
+    } catch (const Error& e) {
+      fail(e.what());
+    }
+  }
   // Parameters: count, then every value a finite number.
   const nlohmann::json& p = j["parameters"];
   if (!p.contains("count") || !p["count"].is_number_integer() || p["count"].get<long long>() < 0) {
@@ -230,6 +243,7 @@ inline nlohmann::json ModelFileToJson(const ModelFile& file, const std::string& 
                       {"provenance", file.provenance.is_null() ? nlohmann::json::object() : file.provenance},
                       {"metrics", file.metrics.is_null() ? nlohmann::json::object() : file.metrics}};
   if (!file.system.is_null()) j["system"] = file.system;
+  j["precision"] = PrecisionName(file.precision);
   ModelFileFromJson(j, name);  // the same checks as loading
   return j;
 }

@@ -37,6 +37,7 @@
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/jacobian.h"
+#include "diffdyn/models/precision.h"
 #include "diffdyn/models/system_description.h"
 
 namespace diffdyn {
@@ -92,6 +93,12 @@ class TransitionModel {
 
   /// Whether Jacobian is available (the ODE-engine oracle has no derivatives).
   virtual bool differentiable() const { return false; }
+
+  /// The precision of the batched paths (precision.h).
+  virtual Precision precision() const { return Precision::kF64; }
+  /// Makes the batched paths compute in `p`; false (and no change) if the model has
+  /// no path in `p` (the default: float64 only).
+  virtual bool SetPrecision(Precision p) { return p == Precision::kF64; }
 
   /// The Jacobian of one transition, jac = [dF/dx, dF/du] (n x (n + m), resized) at
   /// x (n entries), u (m entries), exact to rounding (forward-mode Jets through the

@@ -12,7 +12,8 @@
 //
 // Continuous-time models (analytic and extended) integrate x = (q, qd) under a
 // held torque over one transition of `dt` seconds (continuous_model.h); they need
-// options.dt > 0, the others ignore it.
+// options.dt > 0, the others ignore it. options.precision (--precision) converts a
+// learned model to float32 or float64; the others compute in float64 and refuse f32.
 //
 //   auto model = LoadTransitionModel("out/extended_model.json", {.dt = 0.004});
 //   auto ws = model->MakeWorkspace(256);
@@ -20,6 +21,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -41,6 +43,10 @@ struct LoadModelOptions {
   std::vector<int> actuated{};
   /// The world of the `oracle`.
   PushingConfig world{};
+  /// The precision to compute in (--precision); unset: the model file's own, float64
+  /// for the others. Only the learned kinds have a float32 path; f32 for another
+  /// model is refused.
+  std::optional<Precision> precision{};
 };
 
 /// The model `spec` names (see the file comment). Throws diffdyn::Error with one line

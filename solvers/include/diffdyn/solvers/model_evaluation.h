@@ -49,6 +49,8 @@ struct EvalRequest {
   int substeps = 4;
   /// --threads: 0 for all cores. The numbers do not depend on it.
   int threads = 0;
+  /// --precision: f32 or f64; empty for the model file's own.
+  std::string precision{};
 };
 
 /// The `eval --json` summary of `request` (file comment). Throws diffdyn::Error

@@ -46,6 +46,7 @@ struct TrainRequest {
   int threads = 0;                 ///< --threads: 0 for all cores; results do not depend on it
   int patience = 0;                ///< --patience: epochs without improvement that stop (0: never)
   std::string normalize = "auto";  ///< --normalize: auto, on, off
+  std::string precision = "f64";   ///< --precision: f64 or f32 (parameters and Adam stay double)
   std::uint64_t seed = 0;          ///< --seed: split, initialisation and batch order
   bool progress = false;           ///< a progress bar on stderr
   /// Not given: 100 epochs, lr 1e-3, batch 500, width 100 (a DeLaN: the authors'

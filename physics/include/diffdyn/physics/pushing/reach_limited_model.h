@@ -42,6 +42,7 @@ class ReachLimitedModel : public TransitionModel {
   /// The inner model's kind: the wrapper changes no model file.
   std::string kind() const override { return model_.kind(); }
   SystemDescription description() const override { return model_.description(); }
+  Precision precision() const override { return model_.precision(); }
   std::unique_ptr<TransitionWorkspace> MakeWorkspace(int max_batch) const override {
     return model_.MakeWorkspace(max_batch);
   }
