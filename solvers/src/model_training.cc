@@ -58,7 +58,10 @@ nlohmann::json TrainSummary(const TrainRequest& request, const TrainResult& r, c
             {"stopped_early", r.stopped_early},
             {"system", system},
             {"model", request.model},
-            {"parameters", parameters}});
+            {"parameters", parameters},
+            {"precision", request.precision},
+            {"solver_steps", r.solver_steps},
+            {"rejected_steps", r.rejected_steps}});
   return j;
 }
 

@@ -329,7 +329,14 @@ TrainResult Trainer::Train(const Windows& data,
   problem.validation_loss = [&] {
     return RolloutLoss(*model_, val, options_.gamma, options_.threads, options_.chunk_size);
   };
-  return FitMinibatches(problem, options_, &model_->mutable_parameters(), on_epoch);
+  TrainResult result = FitMinibatches(problem, options_, &model_->mutable_parameters(), on_epoch);
+  for (const auto& chunk : chunks_) {
+    for (const auto& tape : chunk->tapes) {
+      result.solver_steps += tape->accepted_steps;
+      result.rejected_steps += tape->rejected_steps;
+    }
+  }
+  return result;
 }
 
 }  // namespace diffdyn

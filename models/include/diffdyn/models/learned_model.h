@@ -52,18 +52,17 @@
 //   model.Backward(dl_dnext, *ws, &grad_theta, &dl_dstates);  // accumulates grad_theta
 #pragma once
 
+#include <Eigen/Core>
 #include <cmath>
 #include <filesystem>
 #include <memory>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <numeric>
 #include <string>
 #include <type_traits>
 #include <utility>
 #include <vector>
-
-#include <Eigen/Core>
-#include <nlohmann/json.hpp>
 
 #include "diffdyn/autodiff_ode/adjoint.h"
 #include "diffdyn/autodiff_ode/butcher.h"
@@ -86,10 +85,14 @@ enum class LearnedKind { kAbsNn, kResNn, kAbsNode, kResNode };
 /// The name of `type` ("abs-nn", ...).
 inline std::string LearnedKindName(LearnedKind type) {
   switch (type) {
-    case LearnedKind::kAbsNn: return "abs-nn";
-    case LearnedKind::kResNn: return "res-nn";
-    case LearnedKind::kAbsNode: return "abs-node";
-    case LearnedKind::kResNode: return "res-node";
+    case LearnedKind::kAbsNn:
+      return "abs-nn";
+    case LearnedKind::kResNn:
+      return "res-nn";
+    case LearnedKind::kAbsNode:
+      return "abs-node";
+    case LearnedKind::kResNode:
+      return "res-node";
   }
   return "abs-nn";
 }
@@ -97,9 +100,9 @@ inline std::string LearnedKindName(LearnedKind type) {
 /// Parses "abs-nn", "res-nn", "abs-node" or "res-node"; throws diffdyn::Error
 /// naming `option` and the bad value otherwise.
 inline LearnedKind ParseLearnedKind(const std::string& name,
-                                              const std::string& option = "--model") {
-  for (LearnedKind t : {LearnedKind::kAbsNn, LearnedKind::kResNn,
-                             LearnedKind::kAbsNode, LearnedKind::kResNode}) {
+                                    const std::string& option = "--model") {
+  for (LearnedKind t :
+       {LearnedKind::kAbsNn, LearnedKind::kResNn, LearnedKind::kAbsNode, LearnedKind::kResNode}) {
     if (name == LearnedKindName(t)) return t;
   }
   throw Error(StrCat(option, ": unknown model '", name,
@@ -131,10 +134,10 @@ struct Scaling {
     const auto check = [](const Eigen::VectorXd& shift, const Eigen::VectorXd& scale, int size,
                           const char* what) {
       if (shift.size() == 0 && scale.size() == 0) return;
-      DIFFDYN_CHECK(shift.size() == size && scale.size() == size, "scaling: ", what, " needs ", size,
-                    " shifts and scales, got ", shift.size(), " and ", scale.size());
-      DIFFDYN_CHECK(shift.allFinite() && scale.allFinite() && (scale.array() > 0).all(), "scaling: ",
-                    what, " shifts must be finite and scales positive");
+      DIFFDYN_CHECK(shift.size() == size && scale.size() == size, "scaling: ", what, " needs ",
+                    size, " shifts and scales, got ", shift.size(), " and ", scale.size());
+      DIFFDYN_CHECK(shift.allFinite() && scale.allFinite() && (scale.array() > 0).all(),
+                    "scaling: ", what, " shifts must be finite and scales positive");
     };
     check(input_shift, input_scale, inputs, "input");
     check(output_shift, output_scale, outputs, "output");
@@ -180,8 +183,8 @@ struct LearnedModelConfig {
   /// outside [2, kMaxSteps] or tolerance <= 0, or for an invalid system.
   void Validate() const {
     system.Validate();
-    DIFFDYN_CHECK(hidden >= 1 && hidden <= kMaxHidden, "--hidden must be in [1, ", kMaxHidden, "], got ",
-                  hidden);
+    DIFFDYN_CHECK(hidden >= 1 && hidden <= kMaxHidden, "--hidden must be in [1, ", kMaxHidden,
+                  "], got ", hidden);
     DIFFDYN_CHECK(steps >= 2 && steps <= kMaxSteps, "--steps must be in [2, ", kMaxSteps,
                   "] (grid points on [0, 1]), got ", steps);
     DIFFDYN_CHECK(tolerance > 0 && std::isfinite(tolerance), "tolerance must be positive, got ",
@@ -252,7 +255,7 @@ class FeatureMap {
 
  private:
   int inputs_ = 0, features_ = 0;
-  InputFeatures angles_;  // the encoded angles of z, increasing
+  InputFeatures angles_;               // the encoded angles of z, increasing
   Eigen::VectorXd shift_, inv_scale_;  // input scaling (empty: none)
 };
 
@@ -260,7 +263,8 @@ class FeatureMap {
 class OutputMap {
  public:
   OutputMap() = default;
-  explicit OutputMap(const Scaling& scaling) : shift_(scaling.output_shift), scale_(scaling.output_scale) {}
+  explicit OutputMap(const Scaling& scaling)
+      : shift_(scaling.output_shift), scale_(scaling.output_scale) {}
 
   /// Whether the map is the identity.
   bool identity() const { return scale_.size() == 0; }
@@ -311,7 +315,8 @@ struct BasicMlpForwardCache {
   /// Entries that fit the budget for batches of `batch` samples of `arch`.
   int Capacity(const MlpArchitecture& arch, int batch) const {
     const double sum = std::accumulate(arch.sizes.begin(), arch.sizes.end(), 0.0);
-    const double bytes = static_cast<double>(sizeof(S)) * batch * (2 * sum + 2.0 * arch.max_width());
+    const double bytes =
+        static_cast<double>(sizeof(S)) * batch * (2 * sum + 2.0 * arch.max_width());
     return static_cast<int>(std::min(64.0, budget_bytes / std::max(bytes, 1.0)));
   }
 
@@ -326,12 +331,11 @@ struct BasicMlpForwardCache {
 using MlpForwardCache = BasicMlpForwardCache<double>;
 
 /// dz/dt = M(phi(z)) for a batch (n + m rows, one sample per column): the NeuralODE's
-/// vector field as a BatchedVjpSystem (adjoint.h) on matrices of S (float or double). `net` and `features` point at the
-/// model's MLP and feature map and are re-pointed before every use (the model may
-/// have moved). With a `cache`,
-/// Evals of a taped solve keep their activations and the Vjp at the same stage input
-/// (the solver's backward pass visits stages in reverse order) reuses them instead of
-/// a second forward pass; a Vjp at an input not near the top of the cache recomputes.
+/// vector field as a BatchedVjpSystem (adjoint.h) on matrices of S (float or double). `net` and
+/// `features` point at the model's MLP and feature map and are re-pointed before every use (the
+/// model may have moved). With a `cache`, Evals of a taped solve keep their activations and the Vjp
+/// at the same stage input (the solver's backward pass visits stages in reverse order) reuses them
+/// instead of a second forward pass; a Vjp at an input not near the top of the cache recomputes.
 template <typename S>
 struct BasicMlpOdeSystem {
   /// The scalar of the batched matrices (BatchedVjpSystem).
@@ -355,11 +359,13 @@ struct BasicMlpOdeSystem {
   /// Workspace for batches of `batch` samples (one MLP chunk per batch, no Jacobians).
   Workspace MakeWorkspace(int batch) const {
     Workspace ws;
-    ws.mlp = BasicMlpWorkspace<S>(net->architecture(), batch, std::max(batch, 1), /*jacobian=*/false);
+    ws.mlp =
+        BasicMlpWorkspace<S>(net->architecture(), batch, std::max(batch, 1), /*jacobian=*/false);
     return ws;
   }
   /// dzdt = M(phi(z)), z and dzdt (n + m) x B.
-  void Eval(const Eigen::Ref<const Matrix>& z, double, Eigen::Ref<Matrix> dzdt, Workspace& ws) const {
+  void Eval(const Eigen::Ref<const Matrix>& z, double, Eigen::Ref<Matrix> dzdt,
+            Workspace& ws) const {
     const bool encoded = features != nullptr && !features->identity();
     if (cache && cache->recording &&
         cache->count < cache->Capacity(net->architecture(), static_cast<int>(z.cols()))) {
@@ -489,82 +495,16 @@ VectorX<R> PredictLearned(const Mlp<P>& net, const LearnedModelConfig& config,
 /// scaling it by the moments of x_{t+1} - 2 x_t made it worse than no scaling on the
 /// cart-pole (README, "Dynamics models"). A standard deviation below 1e-8 (1 + |mean|)
 /// (a constant) becomes 1.
-inline Scaling FitScaling(const LearnedModelConfig& config, const Eigen::Ref<const Eigen::MatrixXd>& states,
-                          const Eigen::Ref<const Eigen::MatrixXd>& actions,
-                          const Eigen::Ref<const Eigen::MatrixXd>& next) {
-  const int n = config.system.state_size(), m = config.system.action_size();
-  DIFFDYN_CHECK(states.rows() == n && actions.rows() == m && next.rows() == n && states.cols() >= 1 &&
-                    actions.cols() == states.cols() && next.cols() == states.cols(),
-                "FitScaling: expected states n x N, actions m x N, next n x N with N >= 1");
-  // Mean and standard deviation of each row.
-  const auto moments = [](const Eigen::MatrixXd& v, Eigen::VectorXd& mean, Eigen::VectorXd& sd) {
-    mean = v.rowwise().mean();
-    sd = ((v.colwise() - mean).array().square().rowwise().sum() / static_cast<double>(v.cols())).sqrt();
-    for (Eigen::Index r = 0; r < sd.size(); ++r) {
-      if (!(sd[r] >= 1e-8 * (1.0 + std::abs(mean[r])))) sd[r] = 1.0;
-    }
-  };
-  Scaling scaling;
-  Eigen::MatrixXd z(n + m, states.cols()), phi;
-  z.topRows(n) = states;
-  z.bottomRows(m) = actions;
-  FeatureMap(config.system).Apply(z, phi);
-  moments(phi, scaling.input_shift, scaling.input_scale);
-  if (config.type == LearnedKind::kResNode) return scaling;
-  const Eigen::MatrixXd target = config.type == LearnedKind::kAbsNn ? next : next - states;
-  Eigen::VectorXd mean, sd;
-  moments(target, mean, sd);
-  const int outputs = IsNeuralOde(config.type) ? n + m : n;
-  scaling.output_shift = Eigen::VectorXd::Zero(outputs);
-  scaling.output_scale = Eigen::VectorXd::Ones(outputs);
-  scaling.output_shift.head(n) = mean;
-  scaling.output_scale.head(n) = sd;
-  return scaling;
-}
+Scaling FitScaling(const LearnedModelConfig& config,
+                   const Eigen::Ref<const Eigen::MatrixXd>& states,
+                   const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                   const Eigen::Ref<const Eigen::MatrixXd>& next);
 
-/// The buffers of a LearnedModel's batched paths in one precision S (double or
-/// float): the MLP's tape (NN kinds), the NeuralODE's field, forward cache, solver
-/// and tape, and [x; u], phi, outputs and gradients as S matrices.
+// The per-precision buffers and the workspace class of the batched paths
+// (learned_model.cc).
 template <typename S>
-struct LearnedEngine {
-  using Matrix = MatrixX<S>;
-  // float: the model's parameters rounded to float at each Forward / PredictBatch
-  // (the double parameters stay the master copy that optimisers change).
-  Mlp<S> rounded;
-  BasicMlpWorkspace<S> mlp;
-  BasicMlpOdeSystem<S> system;
-  BasicMlpForwardCache<S> cache;
-  std::unique_ptr<BatchedOdeSolver<BasicMlpOdeSystem<S>>> solver;
-  // input = [x; u]; features = phi(input) when angles are encoded (NN kinds).
-  Matrix input, features, output, cotangent, grad_input, grad_z;
-  VectorX<S> grad_params;
-  std::vector<Matrix> outputs, dl_dz;
-};
-
-/// Scratch and tape of one LearnedModel for batches up to a size, one per thread
-/// (and one per rollout step when training through rollouts).
-class LearnedWorkspace : public TransitionWorkspace {
- public:
-  LearnedWorkspace() = default;
-  LearnedWorkspace(const LearnedWorkspace&) = delete;
-  LearnedWorkspace& operator=(const LearnedWorkspace&) = delete;
-
- private:
-  friend class LearnedModel;
-  template <typename S>
-  LearnedEngine<S>& engine() {
-    if constexpr (std::is_same_v<S, float>) {
-      return f32;
-    } else {
-      return f64;
-    }
-  }
-  LearnedEngine<double> f64;
-  LearnedEngine<float> f32;
-  std::vector<double> times{0.0, 1.0};
-  int batch = 0;
-  bool taped = false;
-};
+struct LearnedEngine;
+class LearnedWorkspace;
 
 /// One of the four learned models: config + MLP parameters (see the file comment).
 /// Immutable during prediction; training changes mutable_parameters() between calls.
@@ -572,7 +512,9 @@ class LearnedModel final : public DifferentiableTransitionModel {
  public:
   /// A model with the given MLP, whose architecture must equal config.Architecture().
   LearnedModel(const LearnedModelConfig& config, Mlp<double> net)
-      : config_(config), net_(std::move(net)), features_(config_.system, config_.scaling),
+      : config_(config),
+        net_(std::move(net)),
+        features_(config_.system, config_.scaling),
         output_(config_.scaling) {
     config_.Validate();
     DIFFDYN_CHECK(net_.architecture() == config_.Architecture(), LearnedKindName(config.type),
@@ -615,60 +557,34 @@ class LearnedModel final : public DifferentiableTransitionModel {
   }
   SystemDescription description() const override { return config_.system; }
 
-  std::unique_ptr<TransitionWorkspace> MakeWorkspace(int max_batch) const override {
-    auto ws = std::make_unique<LearnedWorkspace>();
-    Prepare(std::max(max_batch, 1), *ws);
-    return ws;
-  }
+  std::unique_ptr<TransitionWorkspace> MakeWorkspace(int max_batch) const override;
 
   /// next = F(states, actions): n x B, m x B, n x B (no tape kept), computed in the
   /// configured precision.
   void PredictBatch(const Eigen::Ref<const Eigen::MatrixXd>& states,
-                    const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
-                    TransitionWorkspace& ws) const override {
-    CheckBatchSizes(states, actions, next);
-    Run(states, actions, next, Cast(ws), /*tape=*/false);
-  }
+                    const Eigen::Ref<const Eigen::MatrixXd>& actions,
+                    Eigen::Ref<Eigen::MatrixXd> next, TransitionWorkspace& ws) const override;
 
   /// next = F(states, actions) (n x B, m x B, n x B), recording the tape for Backward in `ws`
   /// (a workspace from MakeWorkspace). Throws diffdyn::NumericalError if the solver
   /// fails (non-finite state, step-size underflow).
   void Forward(const Eigen::Ref<const Eigen::MatrixXd>& states,
                const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
-               TransitionWorkspace& ws) const override {
-    CheckBatchSizes(states, actions, next);
-    Run(states, actions, next, Cast(ws), /*tape=*/true);
-  }
+               TransitionWorkspace& ws) const override;
 
   /// Reverse mode of the last Forward on `ws`: given dl_dnext = dL/dnext (n x B),
   /// adds dL/dtheta to *grad_params (size num_parameters(); may be null) and writes
   /// dL/dstates (n x B; resized; may be null). In float32 the cotangents and the
   /// per-call parameter gradient are float; the sum into *grad_params is double.
-  void Backward(const Eigen::Ref<const Eigen::MatrixXd>& dl_dnext, TransitionWorkspace& ws_base,
-                Eigen::VectorXd* grad_params, Eigen::MatrixXd* dl_dstates) const override {
-    LearnedWorkspace& ws = Cast(ws_base);
-    DIFFDYN_CHECK(ws.taped, kind(), ": Backward needs a Forward on the same workspace");
-    const int n = state_size();
-    DIFFDYN_CHECK(dl_dnext.rows() == n && dl_dnext.cols() == ws.batch, kind(),
-                  ": Backward got a ", dl_dnext.rows(), " x ", dl_dnext.cols(),
-                  " cotangent, expected ", n, " x ", ws.batch);
-    DIFFDYN_CHECK(grad_params == nullptr || grad_params->size() == num_parameters(), kind(),
-                  ": gradient vector has ", grad_params ? grad_params->size() : 0, " entries, expected ",
-                  num_parameters());
-    if (config_.precision == Precision::kF32) {
-      BackwardIn<float>(dl_dnext, ws, grad_params, dl_dstates);
-    } else {
-      BackwardIn<double>(dl_dnext, ws, grad_params, dl_dstates);
-    }
-  }
+  void Backward(const Eigen::Ref<const Eigen::MatrixXd>& dl_dnext, TransitionWorkspace& ws,
+                Eigen::VectorXd* grad_params, Eigen::MatrixXd* dl_dstates) const override;
 
   bool differentiable() const override { return true; }
 
   /// [dF/dx, dF/du] (n x (n + m)) by Jets through the network (and a NeuralODE's solver).
-  Eigen::VectorXd Jacobian(const Eigen::Ref<const Eigen::VectorXd>& x, const Eigen::Ref<const Eigen::VectorXd>& u,
-                           Eigen::MatrixXd* jac) const override {
-    return JetJacobian([this](const auto& xj, const auto& uj) { return Predict(xj, uj); }, x, u, jac);
-  }
+  Eigen::VectorXd Jacobian(const Eigen::Ref<const Eigen::VectorXd>& x,
+                           const Eigen::Ref<const Eigen::VectorXd>& u,
+                           Eigen::MatrixXd* jac) const override;
 
   /// F(x, u) for one sample (x: n, u: m entries) on any scalar (Jets for input
   /// derivatives).
@@ -684,140 +600,31 @@ class LearnedModel final : public DifferentiableTransitionModel {
   const OutputMap& output_map() const { return output_; }
 
  private:
-  LearnedWorkspace& Cast(TransitionWorkspace& ws) const {
-    auto* p = dynamic_cast<LearnedWorkspace*>(&ws);
-    DIFFDYN_CHECK(p != nullptr, kind(), ": the workspace was not made by a LearnedModel");
-    return *p;
-  }
-
+  LearnedWorkspace& Cast(TransitionWorkspace& ws) const;
   // The network the batched paths of precision S use: the model's own (double) or
   // the engine's float copy, rounded from the current parameters when `refresh`.
   template <typename S>
-  const Mlp<S>& Network(LearnedEngine<S>& e, bool refresh) const {
-    if constexpr (std::is_same_v<S, double>) {
-      return net_;
-    } else {
-      if (refresh) {
-        if (!(e.rounded.architecture() == net_.architecture())) e.rounded = net_.template cast<S>();
-        e.rounded.mutable_parameters() = net_.parameters().template cast<S>();
-      }
-      return e.rounded;
-    }
-  }
-
+  const Mlp<S>& Network(LearnedEngine<S>& e, bool refresh) const;
   // Points the NeuralODE field of engine `e` at the network, maps and cache.
   template <typename S>
-  void Attach(LearnedEngine<S>& e, const Mlp<S>& net) const {
-    e.system.net = &net;
-    e.system.features = &features_;
-    e.system.output = &output_;
-    e.system.cache = &e.cache;
-  }
-
+  void Attach(LearnedEngine<S>& e, const Mlp<S>& net) const;
   // Sizes the engine's buffers for a batch of b (allocates only when b changes).
   template <typename S>
-  void Prepare(int b, LearnedEngine<S>& e, const Mlp<S>& net) const {
-    Attach(e, net);
-    if (IsNeuralOde(config_.type)) {
-      if (!e.solver) {
-        e.solver = std::make_unique<BatchedOdeSolver<BasicMlpOdeSystem<S>>>(e.system, config_.ode_options());
-      }
-    } else {
-      e.mlp.Reserve(net.architecture(), b, /*jacobian=*/false);
-    }
-    const int z = state_size() + action_size();
-    if (e.input.cols() == b && e.input.rows() == z) return;
-    e.input.resize(z, b);
-    e.dl_dz.assign(2, MatrixX<S>());
-    e.dl_dz[1].resize(z, b);
-  }
-
+  void Prepare(int b, LearnedEngine<S>& e, const Mlp<S>& net) const;
   // Sizes a workspace for batches of b in the configured precision.
-  void Prepare(int b, LearnedWorkspace& ws) const {
-    if (config_.precision == Precision::kF32) {
-      Prepare(b, ws.f32, Network(ws.f32, /*refresh=*/true));
-    } else {
-      Prepare(b, ws.f64, Network(ws.f64, /*refresh=*/true));
-    }
-    ws.batch = b;
-  }
-
+  void Prepare(int b, LearnedWorkspace& ws) const;
   void Run(const Eigen::Ref<const Eigen::MatrixXd>& states,
            const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
-           LearnedWorkspace& ws, bool tape) const {
-    if (config_.precision == Precision::kF32) {
-      RunIn<float>(states, actions, next, ws, tape);
-    } else {
-      RunIn<double>(states, actions, next, ws, tape);
-    }
-    if (IsResidual(config_.type)) next += states;
-    ws.batch = static_cast<int>(states.cols());
-    ws.taped = tape;
-  }
-
-  // next = F(states, actions) but the residual term, computed in S; [x; u] is rounded
-  // to S on entry and the result widened to double on exit.
+           LearnedWorkspace& ws, bool tape) const;
+  // next = F(states, actions) but the residual term, computed in S.
   template <typename S>
-  void RunIn(const Eigen::Ref<const Eigen::MatrixXd>& states, const Eigen::Ref<const Eigen::MatrixXd>& actions,
-             Eigen::Ref<Eigen::MatrixXd> next, LearnedWorkspace& ws, bool tape) const {
-    LearnedEngine<S>& e = ws.engine<S>();
-    const Mlp<S>& net = Network(e, /*refresh=*/true);
-    const int b = static_cast<int>(states.cols());
-    Prepare(b, e, net);
-    const int n = state_size();
-    e.input.topRows(n) = states.template cast<S>();
-    e.input.bottomRows(action_size()) = actions.template cast<S>();
-    if (IsNeuralOde(config_.type)) {
-      e.cache.Start(tape);
-      e.solver->Forward(e.input, ws.times, &e.outputs, tape);
-      e.cache.recording = false;
-      next = e.outputs[1].topRows(n).template cast<double>();
-      return;
-    }
-    if (!features_.identity()) features_.Apply(e.input, e.features);
-    const MatrixX<S>& input = features_.identity() ? e.input : e.features;
-    if (tape) {
-      net.Forward(input, &e.output, nullptr, &e.mlp);
-    } else {
-      if (e.output.rows() != n || e.output.cols() != b) e.output.resize(n, b);
-      net.Evaluate(input, e.output, &e.mlp);
-    }
-    output_.Apply(e.output);
-    next = e.output.template cast<double>();
-  }
-
+  void RunIn(const Eigen::Ref<const Eigen::MatrixXd>& states,
+             const Eigen::Ref<const Eigen::MatrixXd>& actions, Eigen::Ref<Eigen::MatrixXd> next,
+             LearnedWorkspace& ws, bool tape) const;
   // Backward in precision S (see Backward).
   template <typename S>
   void BackwardIn(const Eigen::Ref<const Eigen::MatrixXd>& dl_dnext, LearnedWorkspace& ws,
-                  Eigen::VectorXd* grad_params, Eigen::MatrixXd* dl_dstates) const {
-    LearnedEngine<S>& e = ws.engine<S>();
-    const Mlp<S>& net = Network(e, /*refresh=*/false);  // the network of the Forward
-    const int n = state_size(), b = ws.batch;
-    if (IsNeuralOde(config_.type)) {
-      // Adjoint seed dL/dz(1) = [gbar; 0]; dL/dx_t = top rows of dL/dz(0).
-      Attach(e, net);
-      MatrixX<S>& seed = e.dl_dz[1];
-      seed.topRows(n) = dl_dnext.template cast<S>();
-      seed.bottomRows(action_size()).setZero();
-      e.solver->BackwardDiscrete(e.dl_dz, &e.grad_input, &e.grad_params);
-    } else {
-      static const MatrixX<S> kNone;
-      e.cotangent = dl_dnext.template cast<S>();
-      output_.Pullback(e.cotangent);
-      net.Backward(e.cotangent, kNone, &e.grad_params, &e.grad_input, &e.mlp);
-      // dL/d[x; u] from dL/dphi.
-      if (!features_.identity()) {
-        features_.Vjp(e.input, e.grad_input, e.grad_z);
-        e.grad_input.swap(e.grad_z);
-      }
-    }
-    if (grad_params) *grad_params += e.grad_params.template cast<double>();
-    if (dl_dstates) {
-      if (dl_dstates->rows() != n || dl_dstates->cols() != b) dl_dstates->resize(n, b);
-      *dl_dstates = e.grad_input.topRows(n).template cast<double>();
-      if (IsResidual(config_.type)) *dl_dstates += dl_dnext;
-    }
-  }
+                  Eigen::VectorXd* grad_params, Eigen::MatrixXd* dl_dstates) const;
 
   LearnedModelConfig config_;
   Mlp<double> net_;
@@ -831,121 +638,31 @@ class LearnedModel final : public DifferentiableTransitionModel {
 
 /// The "architecture" object of a learned model file:
 /// {"mlp": {sizes, activations}, "hidden": h, "solver": name, "steps": N, "tolerance": tol}.
-inline nlohmann::json LearnedArchitectureToJson(const LearnedModelConfig& config) {
-  nlohmann::json j = {{"mlp", MlpArchitectureToJson(config.Architecture())},
-                      {"hidden", config.hidden},
-                      {"solver", MethodName(config.method)},
-                      {"steps", config.steps},
-                      {"tolerance", config.tolerance}};
-  const auto list = [](const Eigen::VectorXd& v) { return std::vector<double>(v.data(), v.data() + v.size()); };
-  const Scaling& s = config.scaling;
-  if (s.has_input() || s.has_output()) {
-    j["scaling"] = {{"input_shift", list(s.input_shift)}, {"input_scale", list(s.input_scale)},
-                    {"output_shift", list(s.output_shift)}, {"output_scale", list(s.output_scale)}};
-  }
-  return j;
-}
+nlohmann::json LearnedArchitectureToJson(const LearnedModelConfig& config);
 
 /// Inverse of LearnedArchitectureToJson for a file of `kind` whose system is
 /// `system`; throws diffdyn::Error (without the file name) for a missing or
 /// inconsistent field.
-inline LearnedModelConfig LearnedConfigFromJson(const std::string& kind, const nlohmann::json& j,
-                                                const SystemDescription& system) {
-  DIFFDYN_CHECK(j.is_object(), "architecture must be an object");
-  LearnedModelConfig config;
-  config.type = ParseLearnedKind(kind, "kind");
-  config.system = system;
-  auto field = [&](const char* key) -> const nlohmann::json& {
-    DIFFDYN_CHECK(j.contains(key), "architecture: missing '", key, "'");
-    return j[key];
-  };
-  DIFFDYN_CHECK(field("solver").is_string(), "architecture: 'solver' must be a string");
-  DIFFDYN_CHECK(field("tolerance").is_number(), "architecture: 'tolerance' must be a number");
-  config.hidden = static_cast<int>(
-      JsonInt(field("hidden"), 1, LearnedModelConfig::kMaxHidden, "architecture: 'hidden'"));
-  config.method = ParseMethod(j["solver"].get<std::string>(), "architecture: solver");
-  config.steps =
-      static_cast<int>(JsonInt(field("steps"), 2, LearnedModelConfig::kMaxSteps, "architecture: 'steps'"));
-  config.tolerance = j["tolerance"].get<double>();
-  if (j.contains("scaling")) {
-    const nlohmann::json& sc = j["scaling"];
-    const auto numbers = [&](const char* key) {
-      DIFFDYN_CHECK(sc.is_object() && sc.contains(key) && sc[key].is_array(), "architecture: scaling: '",
-                    key, "' must be a list of numbers");
-      Eigen::VectorXd v(static_cast<Eigen::Index>(sc[key].size()));
-      for (std::size_t i = 0; i < sc[key].size(); ++i) {
-        DIFFDYN_CHECK(sc[key][i].is_number(), "architecture: scaling: '", key, "' must hold numbers");
-        v[static_cast<Eigen::Index>(i)] = sc[key][i].get<double>();
-      }
-      return v;
-    };
-    config.scaling = {numbers("input_shift"), numbers("input_scale"), numbers("output_shift"),
-                      numbers("output_scale")};
-  }
-  config.Validate();
-  const MlpArchitecture mlp = MlpArchitectureFromJson(field("mlp"));
-  if (!mlp.activations.empty()) config.activation = mlp.activations.front();
-  DIFFDYN_CHECK(mlp == config.Architecture(), "architecture: 'mlp' does not match a ", kind,
-                " with hidden ", config.hidden, " for ", system.state_size(), " states and ",
-                system.action_size(), " actions");
-  return config;
-}
+LearnedModelConfig LearnedConfigFromJson(const std::string& kind, const nlohmann::json& j,
+                                         const SystemDescription& system);
 
 /// The system of a learned model file: its "system" object, or, in files written
 /// before systems were recorded, 3 unnamed states and 3 actions without encoded angles
 /// (the layout every such file has).
-inline SystemDescription LearnedFileSystem(const ModelFile& file) {
-  return file.system.is_null() ? SystemDescription::Unnamed(3, 3) : SystemFromJson(file.system);
-}
+SystemDescription LearnedFileSystem(const ModelFile& file);
 
 /// Registers the four learned kinds with the model-file loader (idempotent). The
 /// parameter count follows from the architecture's "mlp"; LoadLearnedModel checks it
 /// against the system.
-inline void RegisterLearnedModelKinds() {
-  static std::once_flag once;
-  std::call_once(once, [] {
-    for (const char* kind : {"abs-nn", "res-nn", "abs-node", "res-node"}) {
-      RegisterModelKind(kind, [](const nlohmann::json& j) {
-        DIFFDYN_CHECK(j.is_object() && j.contains("mlp"), "architecture: missing 'mlp'");
-        return MlpArchitectureFromJson(j["mlp"]).num_parameters();
-      });
-    }
-  });
-}
+void RegisterLearnedModelKinds();
 
 /// Saves `model` atomically to `path` with provenance and metrics objects.
-inline void SaveLearnedModel(const std::filesystem::path& path, const LearnedModel& model,
-                             const nlohmann::json& provenance = nlohmann::json::object(),
-                             const nlohmann::json& metrics = nlohmann::json::object()) {
-  RegisterLearnedModelKinds();
-  SaveModelFile(path, ModelFile{model.kind(), LearnedArchitectureToJson(model.config()),
-                                model.parameters(), provenance, metrics,
-                                SystemToJson(model.system()), model.config().precision});
-}
+void SaveLearnedModel(const std::filesystem::path& path, const LearnedModel& model,
+                      const nlohmann::json& provenance = nlohmann::json::object(),
+                      const nlohmann::json& metrics = nlohmann::json::object());
 
 /// Loads a learned model file; throws diffdyn::Error with one line naming the path
 /// for a bad file or a kind that is not one of the four.
-inline LearnedModel LoadLearnedModel(const std::filesystem::path& path,
-                                     ModelFile* contents = nullptr) {
-  RegisterLearnedModelKinds();
-  ModelFile file = LoadModelFile(path);
-  const bool known = file.kind == "abs-nn" || file.kind == "res-nn" || file.kind == "abs-node" ||
-                     file.kind == "res-node";
-  DIFFDYN_CHECK(known, path.string(), ": model kind is '", file.kind,
-                "', expected abs-nn, res-nn, abs-node or res-node");
-  LearnedModelConfig config;
-  try {
-    config = LearnedConfigFromJson(file.kind, file.architecture, LearnedFileSystem(file));
-  } catch (const Error& e) {
-    throw Error(StrCat(path.string(), ": ", e.what()));
-  }
-  config.precision = file.precision;
-  LearnedModel model(config, Mlp<double>(config.Architecture(), file.parameters));
-  // The training data's sample interval, where the file records it (diffdyn train does).
-  const nlohmann::json& dt = file.provenance.contains("dt") ? file.provenance["dt"] : nlohmann::json();
-  if (dt.is_number() && std::isfinite(dt.get<double>()) && dt.get<double>() > 0) model.set_time_step(dt.get<double>());
-  if (contents) *contents = std::move(file);
-  return model;
-}
+LearnedModel LoadLearnedModel(const std::filesystem::path& path, ModelFile* contents = nullptr);
 
 }  // namespace diffdyn

@@ -46,6 +46,12 @@ namespace diffdyn {
 class TransitionWorkspace {
  public:
   virtual ~TransitionWorkspace() = default;
+
+  /// ODE-solver steps of the calls made on this workspace, for models that integrate
+  /// (accepted steps, and trial steps an adaptive solver's error control rejected);
+  /// 0 for the others. Counted since the workspace was made.
+  long accepted_steps = 0;
+  long rejected_steps = 0;
 };
 
 /// x_{t+1} = F(x_t, u_t) over batches: the common interface of every dynamics model.

@@ -162,6 +162,10 @@ struct TrainResult {
   double final_val_loss = 0.0;
   /// Whether the early stop ended training before options.epochs.
   bool stopped_early = false;
+  /// ODE-solver steps of the training passes (Trainer::Train on a model that
+  /// integrates; TransitionWorkspace): accepted, and rejected by adaptive error control.
+  long solver_steps = 0;
+  long rejected_steps = 0;
 };
 
 /// A supervised problem for FitMinibatches: n_train training samples addressed by
