@@ -37,8 +37,7 @@ const Windows& Data() {
   static const Windows data = [] {
     // Run from the repository root (scripts/run-bench does), or name the file.
     const char* env = std::getenv("DIFFDYN_PUSHING_CSV");
-    const std::string path =
-        env ? env : "../shared/data/pybullet_pushing/collected_data.csv";
+    const std::string path = env ? env : "../shared/data/pybullet_pushing/collected_data.csv";
     const auto all = MakeWindows(ReadDataset(path), 1);
     std::vector<int> first(kTransitions);
     std::iota(first.begin(), first.end(), 0);
@@ -50,7 +49,7 @@ const Windows& Data() {
 // Multiply-adds of one MLP evaluation 6-100-100-6, times 2 flops.
 constexpr double kFlopsPerEval = 2.0 * (6 * 100 + 100 * 100 + 100 * 6);
 
-void RunEpochs(benchmark::State& state, Method method) {
+void RunEpochs(benchmark::State& state, Method method, Precision precision = Precision::kF64) {
   const int threads = static_cast<int>(state.range(0));
   const int chunk_size = static_cast<int>(state.range(1));
   LearnedModelConfig config;
@@ -58,6 +57,7 @@ void RunEpochs(benchmark::State& state, Method method) {
   config.method = method;
   config.steps = 10;
   config.hidden = 100;
+  config.precision = precision;
   LearnedModel model = LearnedModel::Initialized(config, 1);
   TrainOptions options;
   options.epochs = 1;
@@ -89,6 +89,20 @@ BENCHMARK(BM_EpochAbsNodeRk4)
     ->Args({2, 100})
     ->Args({2, 64})
     ->Args({2, 50})
+    ->MeasureProcessCPUTime()
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(2.0);
+
+// The same epoch with the network, solver and adjoint in float32 (parameters, Adam
+// and the loss sums stay double).
+void BM_EpochAbsNodeRk4F32(benchmark::State& state) {
+  RunEpochs(state, Method::kRk4, Precision::kF32);
+}
+BENCHMARK(BM_EpochAbsNodeRk4F32)
+    ->ArgNames({"threads", "chunk"})
+    ->Args({1, 250})
+    ->Args({2, 250})
     ->MeasureProcessCPUTime()
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond)
