@@ -78,11 +78,14 @@ std::unique_ptr<TransitionModel> PlanningModel(const ControlCommandOptions& o, c
   DIFFDYN_CHECK(o.dt > 0 && o.dt <= 1.0, "--dt must be in (0, 1] s, got ", o.dt);
   PeriodsPerStep(o.dt, task.period, "--dt");
   if (o.model.empty() || o.model == o.system) {
-    DIFFDYN_CHECK(PrecisionOption(o.precision).value_or(Precision::kF64) == Precision::kF64, "--precision ",
-                  o.precision, ": the task's own model computes in float64 only (float32: a learned --model)");
+    DIFFDYN_CHECK(PrecisionOption(o.precision).value_or(Precision::kF64) == Precision::kF64,
+                  "--precision ", o.precision,
+                  ": the task's own model computes in float64 only (float32: a learned --model)");
     return TaskModel(task, o.dt, 1);
   }
-  return LoadTransitionModel(o.model, {.dt = o.dt, .method = Method::kRk4Classic, .substeps = 1,
+  return LoadTransitionModel(o.model, {.dt = o.dt,
+                                       .method = Method::kRk4Classic,
+                                       .substeps = 1,
                                        .actuated = TaskActuatedJoints(task),
                                        .precision = PrecisionOption(o.precision)});
 }
@@ -217,8 +220,9 @@ Planner PushingPlanner(const ControlCommandOptions& o, const PushingTask& task) 
 
 void RunControl(const ControlCommandOptions& o) {
   PrecisionOption(o.precision);  // a bad value is bad input whatever the controller
-  DIFFDYN_CHECK(o.precision.empty() || o.controller == "mppi", "--precision: applies to --controller mppi ",
-                "(the model it plans with), not ", o.controller);
+  DIFFDYN_CHECK(o.precision.empty() || o.controller == "mppi",
+                "--precision: applies to --controller mppi ", "(the model it plans with), not ",
+                o.controller);
   // Validate everything before anything is written.
   DIFFDYN_CHECK(o.starts >= 1 && o.starts <= 100000, "--starts must be in [1, 100000], got ", o.starts);
   DIFFDYN_CHECK(o.system == "pushing" || o.system == "pendulum" || o.system == "cartpole", "--system ",

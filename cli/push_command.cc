@@ -134,7 +134,8 @@ void RunPush(const PushArgs& args) {
   options.world.obstacle = args.obstacle;
   DIFFDYN_CHECK(args.trials >= 1, "--trials: must be >= 1, got ", args.trials);
   ValidatePushTaskOptions(options);
-  const std::unique_ptr<TransitionModel> model = LoadPushModel(args.model, options.world, PrecisionOption(args.precision));
+  const std::unique_ptr<TransitionModel> model =
+      LoadPushModel(args.model, options.world, PrecisionOption(args.precision));
   namespace fs = std::filesystem;
   if (!args.out.empty()) {
     std::error_code ec;

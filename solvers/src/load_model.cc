@@ -62,7 +62,8 @@ std::unique_ptr<TransitionModel> DelanTransitionModel(Delan delan, const std::st
 }
 
 // The model `spec` names, in the precision its file records (float64 for the others).
-std::unique_ptr<TransitionModel> OpenModel(const std::string& spec, const LoadModelOptions& options) {
+std::unique_ptr<TransitionModel> OpenModel(const std::string& spec,
+                                           const LoadModelOptions& options) {
   DIFFDYN_CHECK(!spec.empty(), "--model: empty (a model file, an analytic model name or 'oracle')");
   if (spec == "oracle") return std::make_unique<PushingOracle>(options.world);
   for (const std::string& name : AnalyticModelNames()) {
@@ -104,8 +105,9 @@ std::unique_ptr<TransitionModel> LoadTransitionModel(const std::string& spec,
                                                      const LoadModelOptions& options) {
   std::unique_ptr<TransitionModel> model = OpenModel(spec, options);
   if (options.precision && !model->SetPrecision(*options.precision)) {
-    throw Error(StrCat("--precision ", PrecisionName(*options.precision), ": --model ", spec, " is a ",
-                       model->kind(), " model, which computes in float64 only (float32: abs-nn, res-nn, "
+    throw Error(StrCat("--precision ", PrecisionName(*options.precision), ": --model ", spec,
+                       " is a ", model->kind(),
+                       " model, which computes in float64 only (float32: abs-nn, res-nn, "
                        "abs-node, res-node)"));
   }
   return model;

@@ -35,8 +35,8 @@ void CheckRequest(const TrainRequest& r) {
                 r.normalize, "' (expected auto, on or off)");
   DIFFDYN_CHECK(r.loss == "single" || r.loss == "multi", "--loss: unknown loss '", r.loss,
                 "' (expected single or multi)");
-  DIFFDYN_CHECK(ParsePrecision(r.precision) == Precision::kF64 || !IsDelanKind(r.model), "--precision ",
-                r.precision, ": a ", r.model,
+  DIFFDYN_CHECK(ParsePrecision(r.precision) == Precision::kF64 || !IsDelanKind(r.model),
+                "--precision ", r.precision, ": a ", r.model,
                 " trains in float64 only (float32: abs-nn, res-nn, abs-node, res-node)");
 }
 

@@ -35,20 +35,16 @@ class TinyMlpT {
   int num_params() const { return static_cast<int>(theta_.size()); }
   const Vec& theta() const { return theta_; }
   void set_theta(const Eigen::VectorXd& theta) { theta_ = theta.cast<S>(); }
-  Workspace MakeWorkspace(int batch) const {
-    return {Mat(h_, batch), Mat(h_, batch)};
-  }
+  Workspace MakeWorkspace(int batch) const { return {Mat(h_, batch), Mat(h_, batch)}; }
 
-  void Eval(const Eigen::Ref<const Mat>& z, double t, Eigen::Ref<Mat> dzdt,
-            Workspace& ws) const {
+  void Eval(const Eigen::Ref<const Mat>& z, double t, Eigen::Ref<Mat> dzdt, Workspace& ws) const {
     Forward(z, t, ws);
     dzdt.noalias() = W2() * ws.act;
     dzdt.colwise() += b2();
   }
 
-  void Vjp(const Eigen::Ref<const Mat>& z, double t,
-           const Eigen::Ref<const Mat>& lambda, Eigen::Ref<Mat> vjp_z,
-           Eigen::Ref<Vec> grad, Workspace& ws) const {
+  void Vjp(const Eigen::Ref<const Mat>& z, double t, const Eigen::Ref<const Mat>& lambda,
+           Eigen::Ref<Mat> vjp_z, Eigen::Ref<Vec> grad, Workspace& ws) const {
     Forward(z, t, ws);
     // Gradient of the pre-activation: (W2^T lambda) * (1 - tanh^2).
     ws.grad_pre.noalias() = W2().transpose() * lambda;
@@ -56,8 +52,7 @@ class TinyMlpT {
     vjp_z.noalias() = W1().transpose() * ws.grad_pre;
     Eigen::Map<Mat>(grad.data(), h_, n_).noalias() += ws.grad_pre * z.transpose();
     grad.segment(h_ * n_, h_) += ws.grad_pre.rowwise().sum();
-    Eigen::Map<Mat>(grad.data() + h_ * n_ + h_, n_, h_).noalias() +=
-        lambda * ws.act.transpose();
+    Eigen::Map<Mat>(grad.data() + h_ * n_ + h_, n_, h_).noalias() += lambda * ws.act.transpose();
     grad.tail(n_) += lambda.rowwise().sum();
   }
 
@@ -450,8 +445,8 @@ TEST(BatchedOdeSolverFloat, StatesAndAdjointsMatchDoubleToFloatRounding) {
     Method method;
     bool continuous;
   };
-  for (const Case c : {Case{Method::kRk4, false}, Case{Method::kEuler, false}, Case{Method::kDopri5, false},
-                       Case{Method::kRk4, true}}) {
+  for (const Case c : {Case{Method::kRk4, false}, Case{Method::kEuler, false},
+                       Case{Method::kDopri5, false}, Case{Method::kRk4, true}}) {
     OdeOptions options;
     options.method = c.method;
     options.dt = 0.05;

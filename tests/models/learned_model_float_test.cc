@@ -2,13 +2,13 @@
 // same model (double master parameters) and inputs, prediction, parameter gradient
 // and state gradient within a tolerance from float's epsilon, through sin/cos
 // features, scalings, fixed-step and adaptive solvers; the precision in model files.
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 #include <string>
-
-#include <gtest/gtest.h>
 
 #include "diffdyn/models/learned_model.h"
 #include "diffdyn/models/random.h"
@@ -84,7 +84,8 @@ TEST_P(LearnedModelPrecision, Float32MatchesFloat64WithinFloatRounding) {
   LearnedModel model = LearnedModel::Initialized(FloatCaseConfig(GetParam()), 5);
   Rng rng(21);
   const int b = 300;
-  const Eigen::MatrixXd x = NormalMatrix(2, b, rng), u = NormalMatrix(1, b, rng), w = NormalMatrix(2, b, rng);
+  const Eigen::MatrixXd x = NormalMatrix(2, b, rng), u = NormalMatrix(1, b, rng),
+                        w = NormalMatrix(2, b, rng);
   ASSERT_EQ(model.precision(), Precision::kF64);
   const ForwardBackward d = ForwardAndBackward(model, x, u, w);
   ASSERT_TRUE(model.SetPrecision(Precision::kF32));
@@ -127,15 +128,14 @@ TEST_P(LearnedModelPrecision, Float32FollowsParameterUpdates) {
   EXPECT_EQ(after, fresh);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Kinds, LearnedModelPrecision,
-    ::testing::Values(PrecisionCase{LearnedKind::kAbsNn, Method::kRk4},
-                      PrecisionCase{LearnedKind::kResNn, Method::kRk4},
-                      PrecisionCase{LearnedKind::kAbsNode, Method::kRk4},
-                      PrecisionCase{LearnedKind::kResNode, Method::kRk4},
-                      PrecisionCase{LearnedKind::kAbsNode, Method::kDopri5},
-                      PrecisionCase{LearnedKind::kResNode, Method::kEuler}),
-    PrecisionCaseName);
+INSTANTIATE_TEST_SUITE_P(Kinds, LearnedModelPrecision,
+                         ::testing::Values(PrecisionCase{LearnedKind::kAbsNn, Method::kRk4},
+                                           PrecisionCase{LearnedKind::kResNn, Method::kRk4},
+                                           PrecisionCase{LearnedKind::kAbsNode, Method::kRk4},
+                                           PrecisionCase{LearnedKind::kResNode, Method::kRk4},
+                                           PrecisionCase{LearnedKind::kAbsNode, Method::kDopri5},
+                                           PrecisionCase{LearnedKind::kResNode, Method::kEuler}),
+                         PrecisionCaseName);
 
 TEST(LearnedModelPrecisionFile, RecordsAndRestoresThePrecision) {
   LearnedModel model =
@@ -152,7 +152,8 @@ TEST(LearnedModelPrecisionFile, RecordsAndRestoresThePrecision) {
 }
 
 TEST(LearnedModelPrecisionFile, RejectsAnUnknownPrecisionNamingTheFile) {
-  LearnedModel model = LearnedModel::Initialized(FloatCaseConfig({LearnedKind::kAbsNn, Method::kRk4}), 8);
+  LearnedModel model =
+      LearnedModel::Initialized(FloatCaseConfig({LearnedKind::kAbsNn, Method::kRk4}), 8);
   const std::filesystem::path path = ::testing::TempDir() + "/learned_f16.json";
   SaveLearnedModel(path, model);
   nlohmann::json j;

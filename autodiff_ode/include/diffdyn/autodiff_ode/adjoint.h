@@ -106,9 +106,10 @@ using BatchedScalar = typename BatchedScalarOf<S>::type;
 /// double; see the header comment).
 template <typename S>
 concept BatchedVjpSystem =
-    requires(const S& s, const Eigen::Matrix<BatchedScalar<S>, Eigen::Dynamic, Eigen::Dynamic>& z, double t,
-             Eigen::Matrix<BatchedScalar<S>, Eigen::Dynamic, Eigen::Dynamic>& out,
-             Eigen::Matrix<BatchedScalar<S>, Eigen::Dynamic, 1>& grad, typename S::Workspace& ws, int batch) {
+    requires(const S& s, const Eigen::Matrix<BatchedScalar<S>, Eigen::Dynamic, Eigen::Dynamic>& z,
+             double t, Eigen::Matrix<BatchedScalar<S>, Eigen::Dynamic, Eigen::Dynamic>& out,
+             Eigen::Matrix<BatchedScalar<S>, Eigen::Dynamic, 1>& grad, typename S::Workspace& ws,
+             int batch) {
   { s.state_size() } -> std::convertible_to<int>;
   { s.num_params() } -> std::convertible_to<int>;
   { s.MakeWorkspace(batch) } -> std::same_as<typename S::Workspace>;
@@ -150,9 +151,8 @@ class BatchedOdeSolver {
   /// without it memory does not grow with the steps (enough for BackwardContinuous).
   /// Throws diffdyn::Error for wrong sizes or times, diffdyn::NumericalError for
   /// step-size underflow, non-finite states or more than max_steps steps.
-  IntegrationStats Forward(const Eigen::Ref<const Matrix>& z0,
-                           const std::vector<double>& times, std::vector<Matrix>* outputs,
-                           bool record_tape = true) {
+  IntegrationStats Forward(const Eigen::Ref<const Matrix>& z0, const std::vector<double>& times,
+                           std::vector<Matrix>* outputs, bool record_tape = true) {
     const int n = system_.state_size();
     DIFFDYN_CHECK(z0.rows() == n, "BatchedOdeSolver::Forward: z0 has ", z0.rows(),
                   " rows, the system's state has ", n);
@@ -223,8 +223,8 @@ class BatchedOdeSolver {
     std::vector<double> reversed(times_.rbegin(), times_.rend());
     const int last = static_cast<int>(times_.size()) - 1;
     const AugmentedSystem augmented{this};
-    const IntegrationStats stats = IntegrateTimes(
-        augmented, augmented_, reversed, backward, [&](int k, double, Vector& x) {
+    const IntegrationStats stats =
+        IntegrateTimes(augmented, augmented_, reversed, backward, [&](int k, double, Vector& x) {
           const Matrix& g = dl_dz[last - k];
           if (g.size() > 0) x.segment(nb, nb) += g.reshaped();
         });
@@ -407,7 +407,8 @@ class BatchedOdeSolver {
   auto ScaledError() const {
     const auto z = z_.array().template cast<double>().abs();
     const auto z_new = z_new_.array().template cast<double>().abs();
-    return err_.array().template cast<double>().abs() / (options_.abs_tol + options_.rel_tol * z.max(z_new));
+    return err_.array().template cast<double>().abs() /
+           (options_.abs_tol + options_.rel_tol * z.max(z_new));
   }
 
   // The RMS of the scaled error over all n x B entries (accepted when <= 1).
@@ -418,8 +419,8 @@ class BatchedOdeSolver {
     Eigen::Index row = 0, col = 0;
     scaled.maxCoeff(&row, &col);
     throw NumericalError(StrCat("step size underflow at t = ", t, " (dt = ", h,
-                                "): largest error in state entry ", row, " of sample ", col,
-                                " = ", static_cast<double>(z_(row, col))));
+                                "): largest error in state entry ", row, " of sample ", col, " = ",
+                                static_cast<double>(z_(row, col))));
   }
 
   // adjoint_ <- dL/dz_step from dL/dz_{step+1}; accumulates dL/dtheta.
@@ -431,7 +432,8 @@ class BatchedOdeSolver {
       if (!needed_[i]) continue;
       kbar_ = Scalar(h * tableau_.b[i]) * adjoint_;
       for (int j = i + 1; j < s; ++j) {
-        if (needed_[j] && tableau_.a[j][i] != 0.0) kbar_.noalias() += Scalar(h * tableau_.a[j][i]) * w_[j];
+        if (needed_[j] && tableau_.a[j][i] != 0.0)
+          kbar_.noalias() += Scalar(h * tableau_.a[j][i]) * w_[j];
       }
       system_.Vjp(TapeSlot(step, i), t + tableau_.c[i] * h, kbar_, w_[i], *dl_dtheta,
                   *workspace_);

@@ -36,17 +36,16 @@
 //   Mlp<double> back = LoadMlp("net.json");
 #pragma once
 
+#include <Eigen/Core>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
 #include <mutex>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
-
-#include <Eigen/Core>
-#include <nlohmann/json.hpp>
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/models/io.h"

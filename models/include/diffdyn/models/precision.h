@@ -24,7 +24,8 @@ enum class Precision { kF64, kF32 };
 inline std::string PrecisionName(Precision p) { return p == Precision::kF32 ? "f32" : "f64"; }
 
 /// Parses "f64" or "f32"; throws diffdyn::Error naming `option` and the value otherwise.
-inline Precision ParsePrecision(const std::string& name, const std::string& option = "--precision") {
+inline Precision ParsePrecision(const std::string& name,
+                                const std::string& option = "--precision") {
   if (name == "f64") return Precision::kF64;
   if (name == "f32") return Precision::kF32;
   throw Error(StrCat(option, ": unknown precision '", name, "' (expected f32 or f64)"));

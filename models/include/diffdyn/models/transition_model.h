@@ -30,10 +30,9 @@
 //   model.PredictBatch(states, actions, next, *ws);  // states n x 1000, actions m x 1000
 #pragma once
 
+#include <Eigen/Core>
 #include <memory>
 #include <string>
-
-#include <Eigen/Core>
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/jacobian.h"

@@ -35,19 +35,19 @@
 //   Eigen::VectorXd qdd2 = model->ForwardDynamics(q, qd, tau, p);   // == qdd
 #pragma once
 
+#include <ceres/jet.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/LU>
 #include <cmath>
 #include <memory>
 #include <string>
 #include <vector>
 
-#include <Eigen/Cholesky>
-#include <Eigen/Core>
-#include <Eigen/LU>
-#include <ceres/jet.h>
-
-#include "diffdyn/autodiff_ode/spd_solve.h"
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/jacobian.h"  // VectorX<T>, MatrixX<T>
+#include "diffdyn/autodiff_ode/spd_solve.h"
 #include "diffdyn/models/continuous_model.h"
 #include "diffdyn/models/json_io.h"
 #include "diffdyn/models/system_description.h"

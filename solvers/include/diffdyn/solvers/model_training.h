@@ -16,10 +16,10 @@
 // `seconds_per_epoch` (median training pass), `final_train_loss`, `final_val_loss`,
 // `system`, `model`, `parameters`, `precision`, `solver_steps` and `rejected_steps`
 // (the ODE solver's accepted and rejected steps over all training passes; 0 without
-// an ODE), `loss`; learned models add `dt`, `dt_jitter` and `normalized`. Learned models scale their inputs and outputs to unit size
-// from the training split unless `normalize` says otherwise ("auto": on except for
-// pushing CSVs, the paper's models); a DeLaN weighs each joint's torque error by
-// 1 / its variance with normalize "on".
+// an ODE), `loss`; learned models add `dt`, `dt_jitter` and `normalized`. Learned models scale
+// their inputs and outputs to unit size from the training split unless `normalize` says otherwise
+// ("auto": on except for pushing CSVs, the paper's models); a DeLaN weighs each joint's torque
+// error by 1 / its variance with normalize "on".
 #pragma once
 
 #include <cstdint>
