@@ -76,7 +76,7 @@ def main():
               f"{ratio:.3f} | {'yes' if inside else 'NO'} | {rejected} |")
         for s in seeds:
             rows.append({"model": model, "seed": s, "val_loss_f64": la[s - 1], "val_loss_f32": lb[s - 1],
-                         "seconds_per_epoch_f64": a[s][1], "seconds_per_epoch_f32": b[s][1],
+                         "in_band": int(low <= lb[s - 1] <= high),
                          "solver_steps_f32": b[s][2], "rejected_steps_f32": b[s][3]})
     with open(HERE / "float32_vs_float64.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else ["model"])
