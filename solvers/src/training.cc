@@ -329,6 +329,10 @@ TrainResult Trainer::Train(const Windows& data,
   problem.validation_loss = [&] {
     return RolloutLoss(*model_, val, options_.gamma, options_.threads, options_.chunk_size);
   };
+  // The tapes outlive a Train call: count this call's steps only.
+  for (const auto& chunk : chunks_) {
+    for (const auto& tape : chunk->tapes) tape->accepted_steps = tape->rejected_steps = 0;
+  }
   TrainResult result = FitMinibatches(problem, options_, &model_->mutable_parameters(), on_epoch);
   for (const auto& chunk : chunks_) {
     for (const auto& tape : chunk->tapes) {
