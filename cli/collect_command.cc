@@ -24,6 +24,7 @@
 #include "diffdyn/physics/pushing/csv.h"
 #include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/joint_collect.h"
+#include "diffdyn/solvers/pushing/world_file.h"
 
 namespace diffdyn::cli {
 namespace {
@@ -36,6 +37,7 @@ struct CollectArgs {
   int threads = 1;
   std::string starts = "seed";
   std::string obstacle = "off";
+  std::string world;  // a pusher world file (calibrated_pusher.json of diagnose --model pushing)
   std::string out;
   // Joint-space systems.
   double seconds = 5.0;
@@ -55,7 +57,8 @@ void CheckOut(const std::string& out) {
 }
 
 void RunJointCollect(const CollectArgs& args) {
-  DIFFDYN_CHECK(!args.pushing_option_given, "--length, --starts and --obstacle apply to --system pushing only");
+  DIFFDYN_CHECK(!args.pushing_option_given,
+                "--length, --starts, --obstacle and --world apply to --system pushing only");
   JointTask task = JointTaskByName(args.system);
   for (const std::string& spec : args.effects) task.effects.push_back(ParseEffectSpec(spec, "--effect"));
   if (args.actuated == "all") task = task.ActuatingAll();
@@ -126,6 +129,7 @@ void RunCollect(const CollectArgs& args) {
   // Without the obstacle by default: a model of the block's free motion predicts a push
   // into the obstacle to overlap it, so the planner's collision cost sees it; data with
   // the obstacle hold contacts the model has no input to explain (README, defaults).
+  if (!args.world.empty()) options.world = LoadPusherWorld(args.world, options.world, "--world");
   options.world.obstacle = args.obstacle == "on";
   ProgressBar bar("collect", args.trajectories, !args.common.quiet);
   options.progress = [&bar](int done) { bar.Update(done); };
@@ -192,6 +196,12 @@ void RegisterCollectCommand(CLI::App& app) {
                       "task's models learn best)")
       ->check(CLI::IsMember({"on", "off"}))
       ->capture_default_str();
+  CLI::Option* world =
+      command
+          ->add_option("--world", args->world,
+                       "Pushing: a pusher world file (kind oracle, e.g. diagnose --model pushing's "
+                       "calibrated_pusher.json) in place of the default world")
+          ->check(InputPath());
   CLI::Option* seconds = command->add_option("--seconds", args->seconds, "Joint space: seconds per trajectory")
       ->check(Bounded(1e-3, 3600))
                              ->capture_default_str();
@@ -206,8 +216,9 @@ void RegisterCollectCommand(CLI::App& app) {
       ->capture_default_str();
   command->add_option("--out", args->out, "Output CSV (pushing or joint-space)")
       ->check(OutputPath())->required();
-  command->callback([args, length, starts, obstacle, seconds, dt, effect, actuated] {
-    args->pushing_option_given = length->count() + starts->count() + obstacle->count() > 0;
+  command->callback([args, length, starts, obstacle, world, seconds, dt, effect, actuated] {
+    args->pushing_option_given =
+        length->count() + starts->count() + obstacle->count() + world->count() > 0;
     if (args->trajectories == 0) args->trajectories = args->system == "pushing" ? 1000 : 100;
     args->joint_option_given = seconds->count() + dt->count() + effect->count() + actuated->count() > 0;
     RunCollect(*args);

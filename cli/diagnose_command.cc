@@ -34,10 +34,21 @@ bool IsAnalyticName(const std::string& name) {
 
 void RunDiagnose(DiagnoseOptions& o) {
   o.request.pipeline.seed = o.common.seed;
+  if (!o.common.quiet) {
+    o.request.pusher.progress = [](const std::string& line) {
+      fmt::print(stderr, "diagnose: {}\n", line);
+    };
+  }
   const nlohmann::json summary = DiagnoseFiles(o.request);
   const fs::path out(o.request.out);
-  const int joints = static_cast<int>(summary["nominal_rmse"].size());
-  RunPlotScript("diagnose_residuals.py", {(out / "residuals.csv").string(), o.request.out, std::to_string(joints)});
+  if (summary["model"] == "pushing") {
+    RunPlotScript("diagnose_pushing.py",
+                  {(out / "replays.csv").string(), (out / "rollouts.csv").string(), o.request.out});
+  } else {
+    const int joints = static_cast<int>(summary["nominal_rmse"].size());
+    RunPlotScript("diagnose_residuals.py",
+                  {(out / "residuals.csv").string(), o.request.out, std::to_string(joints)});
+  }
   if (o.common.json) {
     PrintJson(summary);
   } else if (!o.common.quiet) {
@@ -54,13 +65,17 @@ void RegisterDiagnoseCommand(CLI::App& app) {
       "diagnose", "Compare a simulation model with measured data: errors, named causes, extended model, gain");
   auto o = std::make_shared<DiagnoseOptions>();
   AddCommonOptions(command, o->common);
-  command->add_option("--model", o->request.model,
-                      "Simulation model: pendulum, cartpole, double-pendulum, arm2, panda, or an "
-                      "extended-physics file (a diagnosis fed back: its effects stay, only what is missing is named)")
+  command
+      ->add_option("--model", o->request.model,
+                   "Simulation model: pendulum, cartpole, double-pendulum, arm2, panda, or an "
+                   "extended-physics file (a diagnosis fed back: its effects stay, only what is "
+                   "missing is named); "
+                   "pushing (the ODE-engine pusher, calibrated against a pushing CSV) or a pusher "
+                   "world file")
       ->required()
       ->check(CLI::Validator(
           [](std::string& m) -> std::string {
-            if (IsAnalyticName(m)) return {};
+            if (IsAnalyticName(m) || m == "pushing") return {};
             try {
               CheckInputPath(m, false);
             } catch (const Error& e) {
@@ -69,8 +84,11 @@ void RegisterDiagnoseCommand(CLI::App& app) {
             return {};
           },
           "NAME|FILE"));
-  command->add_option("--measured", o->request.measured,
-                      "Joint-space CSV (t,q1..,qd1..,tau1..[,qdd1..]) or a dataset folder of shared/data")
+  command
+      ->add_option(
+          "--measured", o->request.measured,
+          "Joint-space CSV (t,q1..,qd1..,tau1..[,qdd1..]) or a dataset folder of shared/data; "
+          "with --model pushing a pushing CSV")
       ->check(InputPath(true))
       ->required();
   command->add_option("--param", o->request.params, "Nominal parameter override name=value (repeatable)");
@@ -81,9 +99,29 @@ void RegisterDiagnoseCommand(CLI::App& app) {
   command->add_option("--cutoff-hz", o->request.pipeline.cutoff_hz,
                       "Zero-phase smoothing cutoff (Hz, at most 10; default 0: min(10 Hz, sample rate / 4))")
       ->check(Bounded(0, 10));
-  command->add_option("--holdout", o->request.pipeline.holdout_fraction, "Held-out fraction at the end (in time)")
+  command
+      ->add_option("--holdout", o->request.pipeline.holdout_fraction,
+                   "Held-out fraction at the end (in time); pushing: of the trajectories (seeded)")
       ->check(Bounded(0, 0.9));
-  command->add_option("--fit-param", o->request.fit_params, "Nominal parameter fitted on the first quarter first (repeatable)");
+  command->add_option(
+      "--fit-param", o->request.fit_params,
+      "Nominal parameter fitted on the first quarter first (repeatable); pushing: the pusher "
+      "parameters to calibrate (default tip_pad_x, tip_pad_y, tip_block_friction, "
+      "block_table_friction, block_inertia)");
+  command
+      ->add_option(
+          "--fit-transitions", o->request.pusher.fit_transitions,
+          "Pushing: training transitions the calibration replays (seeded subsample; 0 = all)")
+      ->check(Bounded(0, 1e7));
+  command
+      ->add_option("--max-iterations", o->request.pusher.max_iterations,
+                   "Pushing: Levenberg-Marquardt iterations at most")
+      ->check(Bounded(0, 1000));
+  command
+      ->add_option("--threads", o->request.pusher.threads,
+                   "Pushing: worker threads (0 = all cores; "
+                   "the numbers do not depend on it)")
+      ->check(Bounded(0, 256));
   command->add_option("--scale-param", o->request.scale_params,
                       "Nominal parameters scaled by one common fitted factor (repeatable)");
   command->add_option("--phase-period", o->request.pipeline.phase_period,

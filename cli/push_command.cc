@@ -26,6 +26,7 @@
 #include "diffdyn/models/io.h"
 #include "diffdyn/models/progress.h"
 #include "diffdyn/solvers/load_model.h"
+#include "diffdyn/solvers/pushing/world_file.h"
 #include "plot.h"
 
 namespace diffdyn::cli {
@@ -98,6 +99,7 @@ namespace {
 struct PushArgs {
   CommonOptions common;
   std::string model;
+  std::string world;
   std::string precision;
   int trials = 20;
   bool obstacle = true;
@@ -131,6 +133,7 @@ void RunPush(const PushArgs& args) {
   options.reach_weight = args.reach_weight;
   options.reach_steps = args.reach_steps;
   options.reach_limited = args.reach_limited;
+  if (!args.world.empty()) options.world = LoadPusherWorld(args.world, options.world, "--world");
   options.world.obstacle = args.obstacle;
   DIFFDYN_CHECK(args.trials >= 1, "--trials: must be >= 1, got ", args.trials);
   ValidatePushTaskOptions(options);
@@ -220,6 +223,12 @@ void RegisterPushCommand(CLI::App& app) {
   command->add_option("--model", args->model, "Pushing model file, or 'oracle' (the ODE world)")
       ->required();
   AddPrecisionOption(command, args->precision);
+  command
+      ->add_option("--world", args->world,
+                   "A pusher world file (kind oracle, e.g. diagnose --model pushing's "
+                   "calibrated_pusher.json): "
+                   "the world the pushes are executed in, and the oracle's")
+      ->check(InputPath());
   command->add_option("--trials", args->trials, "Seeded trials (start perturbed per trial)")
       ->check(Bounded(1, 10000));
   command->add_flag("--obstacle,!--free", args->obstacle,

@@ -11,6 +11,7 @@
 #include "diffdyn/physics/model_registry.h"
 #include "diffdyn/physics/pushing/oracle.h"
 #include "diffdyn/solvers/extended_model_file.h"
+#include "diffdyn/solvers/pushing/world_file.h"
 
 namespace diffdyn {
 namespace {
@@ -84,7 +85,10 @@ std::unique_ptr<TransitionModel> OpenModel(const std::string& spec,
   RegisterLearnedModelKinds();
   RegisterExtendedPhysicsKind();
   RegisterDelanKind();
+  RegisterPusherWorldKind();
   const ModelFile file = LoadModelFile(spec);
+  if (file.kind == "oracle")
+    return std::make_unique<PushingOracle>(LoadPusherWorld(spec, options.world));
   if (IsDelanKind(file.kind)) return DelanTransitionModel(LoadDelan(spec), spec, options);
   if (file.kind == "extended-physics") {
     auto extended = std::make_shared<const ExtendedModel>(LoadExtendedModel(spec));
@@ -96,7 +100,7 @@ std::unique_ptr<TransitionModel> OpenModel(const std::string& spec,
   }
   throw Error(StrCat("--model ", spec, ": a model of kind '", file.kind,
                      "' is not a dynamics model (expected abs-nn, res-nn, abs-node, res-node, "
-                     "extended-physics, delan or delan-friction)"));
+                     "extended-physics, delan, delan-friction or a pusher world, kind oracle)"));
 }
 
 }  // namespace

@@ -269,6 +269,7 @@ nlohmann::json Summary(const AnalyticModel& model, const DiagnosisResult& r, con
 }  // namespace
 
 nlohmann::json DiagnoseFiles(const DiagnoseRequest& request) {
+  if (IsPusherModel(request.model)) return DiagnosePusherFiles(request);
   CheckSettings(request.pipeline);
   const ExtendedModel under_test = ModelUnderTest(request);
   const auto model = under_test.model_ptr();

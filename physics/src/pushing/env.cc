@@ -22,6 +22,9 @@ using Vec7 = Panda::Vector7<double>;
 constexpr double kPi = std::numbers::pi;
 
 // The table: collision box 1.5 x 1 x 0.05 m centred at (0.5, 0), top at z = -0.025.
+// True when the tip is a box pad rather than the capsule (PushingConfig::tip_pad_x).
+bool HasPad(const PushingConfig& config) { return config.tip_pad_x > 0; }
+
 constexpr double kTableCenterX = 0.5;
 constexpr double kTableSizeX = 1.5;
 constexpr double kTableSizeY = 1.0;
@@ -240,10 +243,13 @@ struct PushingEnv::World {
         dJointSetHingeParam(hinges[i], dParamHiStop, -Panda::kQMin[i]);
       }
     }
-    // Tip capsule on link 7, axis along z_7, lowest sphere centre at the tool point.
+    // Tip capsule on link 7, axis along z_7, lowest sphere centre at the tool point;
+    // or a box pad over the same height, turned to the world's axes at every step.
     const Vec3 com7(Panda::kCom[6][0], Panda::kCom[6][1], Panda::kCom[6][2]);
     tool_in_link7 = Vec3(0, 0, Panda::kDh[7].d + config.tool_length) - com7;
-    tip_geom = dCreateCapsule(nullptr, config.tip_radius, config.tip_length);
+    tip_geom = HasPad(config) ? dCreateBox(nullptr, 2 * config.tip_pad_x, 2 * config.tip_pad_y,
+                                           config.tip_length + 2 * config.tip_radius)
+                              : dCreateCapsule(nullptr, config.tip_radius, config.tip_length);
     dGeomSetBody(tip_geom, links[6]);
     const Vec3 centre = tool_in_link7 - Vec3(0, 0, config.tip_length / 2);
     dGeomSetOffsetPosition(tip_geom, centre.x(), centre.y(), centre.z());
@@ -326,6 +332,11 @@ struct PushingEnv::World {
   }
 
   void StepWorld(PushResult& result) {
+    if (arm_active && HasPad(config)) {
+      dMatrix3 axes;
+      dRSetIdentity(axes);
+      dGeomSetOffsetWorldRotation(tip_geom, axes);
+    }
     Collide();
     dWorldStep(world, config.time_step);
     dJointGroupEmpty(contacts);
@@ -407,10 +418,12 @@ PushingEnv::PushingEnv(const PushingConfig& config) : world_(std::make_unique<Wo
   DIFFDYN_CHECK(c.block_mass > 0 && c.block_inertia >= 0 && c.block_size > 0 &&
                     c.block_height > 0 && c.block_table_friction >= 0 &&
                     c.tip_block_friction >= 0 && c.tip_radius > 0 && c.tip_length >= 0 &&
-                    c.time_step > 0 && c.push_speed > 0 && c.push_acceleration > 0 &&
-                    c.approach_speed > 0 && c.approach_acceleration > 0 && c.settle_time >= 0,
-                "pushing world: masses, sizes, speeds and the time step must be positive and "
-                "frictions non-negative");
+                    c.tip_pad_x >= 0 && c.tip_pad_y >= 0 &&
+                    (c.tip_pad_x > 0) == (c.tip_pad_y > 0) && c.time_step > 0 && c.push_speed > 0 &&
+                    c.push_acceleration > 0 && c.approach_speed > 0 &&
+                    c.approach_acceleration > 0 && c.settle_time >= 0,
+                "pushing world: masses, sizes, speeds and the time step must be positive, "
+                "frictions non-negative, and the tip's pad half widths both zero or both positive");
   world_->Build();
   Reset({0.4, 0.0, 0.2 * kPi});
 }

@@ -34,6 +34,7 @@
 #include <nlohmann/json.hpp>
 
 #include "diffdyn/solvers/diagnosis.h"
+#include "diffdyn/solvers/pushing/calibration.h"
 
 namespace diffdyn {
 
@@ -53,6 +54,9 @@ struct DiagnoseRequest {
   std::vector<std::string> fit_params{}, scale_params{};
   /// The pipeline's settings (seed, cutoff, hold-out, alpha, ...).
   DiagnosisOptions pipeline{};
+  /// --model pushing: the calibration's settings (its parameters come from
+  /// fit_params when given; seed and hold-out fraction from `pipeline`).
+  PusherCalibrationOptions pusher{};
 };
 
 /// Runs the diagnosis of `request` and writes its files (file comment); returns the
@@ -64,5 +68,21 @@ struct DiagnoseRequest {
 /// diffdyn::Error (one line naming the option and the file) for bad input, before
 /// anything is written.
 nlohmann::json DiagnoseFiles(const DiagnoseRequest& request);
+
+/// DiagnoseFiles for `--model pushing` (or a pusher world file, kind oracle) and
+/// a pushing CSV: the ODE-engine pusher calibrated against the measured poses
+/// (pushing/calibration.h). Writes report.md, calibrated_pusher.json (a pusher
+/// world file), replays.csv (the held-out transitions: state, action, measured,
+/// nominal and calibrated next pose) and rollouts.csv; returns the summary (keys
+/// model, n_samples, nominal_rmse and extended_rmse per state x, y, theta,
+/// heldout_sse_removed, no_significant_discrepancy, named_effects {kind = the
+/// parameter, joint 0, value, unit, stderr}, parameters, nominal_loss,
+/// calibrated_loss, identity_loss, rollout_error_nominal, rollout_error_calibrated,
+/// fit_transitions, train_trajectories, heldout_trajectories, iterations, replays,
+/// report, extended_model, seconds). DiagnoseFiles calls it for those models.
+nlohmann::json DiagnosePusherFiles(const DiagnoseRequest& request);
+
+/// True when `model` names the pusher: "pushing", or a model file of kind oracle.
+bool IsPusherModel(const std::string& model);
 
 }  // namespace diffdyn

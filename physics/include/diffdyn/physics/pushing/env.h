@@ -58,6 +58,12 @@ struct PushingConfig {
   double tool_length = 0.1034;           ///< flange to tool point along the flange z axis (m)
   double tip_radius = 0.016;             ///< radius of the tip capsule (m), see the README
   double tip_length = 0.04;              ///< length of the capsule's axis segment (m)
+  /// Half widths (m) of a box pad in place of the capsule: 0, 0 is the capsule; both
+  /// positive make the tip a box of (2 tip_pad_x, 2 tip_pad_y) in the horizontal plane
+  /// spanning the capsule's height, its sides held parallel to the world's x and y axes
+  /// (as the seed's IK holds the end effector's orientation fixed while pushing).
+  double tip_pad_x = 0.0;
+  double tip_pad_y = 0.0;
   double push_height = 0.02;             ///< z of the tool point while pushing (m)
   // Motion and integration.
   double time_step = 0.002;              ///< dWorldStep step (s)
