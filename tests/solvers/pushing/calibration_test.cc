@@ -149,6 +149,8 @@ TEST(PusherWorldFile, RefusesUnknownKeysAndBadValues) {
   EXPECT_THROW(PusherWorldFromJson({{"table_colour", 1.0}}, FreeWorld()), Error);
   EXPECT_THROW(PusherWorldFromJson({{"block_mass", "heavy"}}, FreeWorld()), Error);
   EXPECT_THROW(PusherWorldFromJson({{"block_mass", -1.0}}, FreeWorld()), Error);
+  EXPECT_THROW(PusherWorldFromJson({{"block_size", 1e300}}, FreeWorld()), Error);
+  EXPECT_THROW(PusherWorldFromJson({{"time_step", 1e-300}}, FreeWorld()), Error);
   EXPECT_THROW(PusherWorldFromJson({{"tip_pad_x", 0.01}}, FreeWorld()), Error);  // pad y is 0
   const std::string path =
       (std::filesystem::path(::testing::TempDir()) / "not_a_world.json").string();
