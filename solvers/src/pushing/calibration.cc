@@ -12,6 +12,7 @@
 #include "diffdyn/autodiff_ode/str_printf.h"
 #include "diffdyn/models/parallel.h"
 #include "diffdyn/models/random.h"
+#include "diffdyn/physics/pushing/oracle.h"
 #include "diffdyn/physics/pushing/system.h"
 
 namespace diffdyn {
@@ -313,21 +314,16 @@ Eigen::Matrix3Xd ReplayPushes(const PushingConfig& config, const Eigen::Matrix3X
                               const Eigen::Matrix3Xd& actions, int threads) {
   DIFFDYN_CHECK(states.cols() == actions.cols(), "ReplayPushes: ", states.cols(), " states and ",
                 actions.cols(), " actions");
+  // The oracle's semantics (unreachable or unholdable: the state itself), one
+  // world per chunk of pushes.
+  const PushingOracle oracle(config);
   const int n = static_cast<int>(states.cols());
-  Eigen::Matrix3Xd next = states;
+  Eigen::Matrix3Xd next(3, n);
   constexpr int kChunk = 16;
   ParallelForChunks(n, kChunk, threads, [&](int, int begin, int end) {
-    PushingEnv env(config);
-    for (int i = begin; i < end; ++i) {
-      const Eigen::Vector3d s = states.col(i);
-      const bool holdable =
-          s.allFinite() && PushingEnv::OnTable(s.x(), s.y()) &&
-          (!config.obstacle || PushingEnv::ObstaclePenetration(s, config.block_size) == 0);
-      if (!holdable) continue;
-      env.Reset(s);
-      const PushResult r = env.Step(actions.col(i));
-      if (r.status != PushStatus::kUnreachable) next.col(i) = r.pose;
-    }
+    const auto workspace = oracle.MakeWorkspace(end - begin);
+    oracle.PredictBatch(states.middleCols(begin, end - begin), actions.middleCols(begin, end - begin),
+                        next.middleCols(begin, end - begin), *workspace);
   });
   return next;
 }
