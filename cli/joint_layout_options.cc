@@ -37,8 +37,12 @@ void AddJointLayoutOptions(CLI::App* command, JointLayoutOptions& options) {
       ->capture_default_str();
   command->add_option("--prismatic", options.prismatic,
                       "Joint-space data: joints that are not angles (not wrapped, no sin/cos), e.g. 1");
-  command->add_option("--angle-features", options.angle_features,
-                      "Joint-space data: learned models see angles as sincos (sin q, cos q) or raw (q)")
+  command
+      ->add_option(
+          "--angle-features", options.angle_features,
+          "Joint-space data: learned models see angles as sincos (sin q, cos q) or raw (q); "
+          "not given: sincos, but raw for res-node (a field periodic in q cannot carry q "
+          "to q_{t+1} - q_t)")
       ->check(CLI::IsMember({"sincos", "raw"}))
       ->capture_default_str();
 }

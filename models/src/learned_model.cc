@@ -13,6 +13,25 @@
 #include <vector>
 
 namespace diffdyn {
+namespace {
+
+// The angle rows of z (z's top rows are states) wrapped to (-pi, pi].
+void WrapAngleRows(const SystemDescription& system, Eigen::MatrixXd& z) {
+  for (int i : system.angles) z.row(i) = z.row(i).unaryExpr([](double a) { return WrapAngle(a); });
+}
+
+// input's angle rows = the wrapped angle rows of states (wrapped in double, then rounded to S).
+template <typename S>
+void WrapAngleRows(const SystemDescription& system, const Eigen::Ref<const Eigen::MatrixXd>& states,
+                   MatrixX<S>& input) {
+  for (int i : system.angles) {
+    for (Eigen::Index c = 0; c < states.cols(); ++c) {
+      input(i, c) = static_cast<S>(WrapAngle(states(i, c)));
+    }
+  }
+}
+
+}  // namespace
 
 Scaling FitScaling(const LearnedModelConfig& config,
                    const Eigen::Ref<const Eigen::MatrixXd>& states,
@@ -36,10 +55,13 @@ Scaling FitScaling(const LearnedModelConfig& config,
   Eigen::MatrixXd z(n + m, states.cols()), phi;
   z.topRows(n) = states;
   z.bottomRows(m) = actions;
+  if (StartsFromWrappedAngles(config.type)) WrapAngleRows(config.system, z);
   FeatureMap(config.system).Apply(z, phi);
   moments(phi, scaling.input_shift, scaling.input_scale);
-  if (config.type == LearnedKind::kResNode) return scaling;
-  const Eigen::MatrixXd target = config.type == LearnedKind::kAbsNn ? next : next - states;
+  // What the network must output: x_{t+1}; else x_{t+1} - x_t (the NeuralODE's field: its
+  // mean rate over unit time); res-node's flow goes from z(0) to x_{t+1} - x_t.
+  Eigen::MatrixXd target = config.type == LearnedKind::kAbsNn ? next : next - states;
+  if (StartsFromWrappedAngles(config.type)) target -= z.topRows(n);
   Eigen::VectorXd mean, sd;
   moments(target, mean, sd);
   const int outputs = IsNeuralOde(config.type) ? n + m : n;
@@ -223,6 +245,7 @@ void LearnedModel::RunIn(const Eigen::Ref<const Eigen::MatrixXd>& states,
   const int n = state_size();
   e.input.topRows(n) = states.template cast<S>();
   e.input.bottomRows(action_size()) = actions.template cast<S>();
+  if (StartsFromWrappedAngles(config_.type)) WrapAngleRows(system(), states, e.input);
   if (IsNeuralOde(config_.type)) {
     e.cache.Start(tape);
     const IntegrationStats stats = e.solver->Forward(e.input, ws.times, &e.outputs, tape);

@@ -152,10 +152,12 @@ FittedModel FitLearnedModel(const Dataset& data, LearnedModelConfig config, cons
 nlohmann::json TrainFiles(const TrainRequest& r) {
   CheckRequest(r);
   if (IsDelanKind(r.model)) return TrainDelanFiles(r);
-  const Dataset dataset = ReadDataset(r.data, r.layout);
-  const SampleIntervals dt = dataset.Intervals();
   LearnedModelConfig config;
   config.type = ParseLearnedKind(r.model);
+  JointLayout layout = r.layout;
+  if (!r.angle_features_given) layout.angle_features = DefaultAngleFeatures(config.type);
+  const Dataset dataset = ReadDataset(r.data, layout);
+  const SampleIntervals dt = dataset.Intervals();
   config.system = dataset.system;
   config.method = ParseMethod(r.solver);
   config.steps = r.steps;

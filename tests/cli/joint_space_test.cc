@@ -1,6 +1,8 @@
-// Joint-space data end to end: collect --system, train and eval on it, eval of
-// diagnose's extended model on the real Panda log, train on the real log, and
-// one-line errors (exit 2) for options that do not fit the system.
+// Joint-space data end to end: collect --system, train and eval on it (abs-node and
+// res-node), eval of diagnose's extended model on the real Panda log, train on the
+// real log, and one-line errors (exit 2) for options that do not fit the system.
+#include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -52,11 +54,46 @@ TEST(JointSpace, CollectTrainEvalPendulum) {
   EXPECT_LT(analytic.at("single_step_loss").get<double>(), baseline);
 }
 
+// The residual NeuralODE learns the pendulum from its flow started at the wrapped
+// angle (learned_model.h): raw angle features by default, recorded in the model file;
+// asking it for (sin, cos) features is a one-line error and writes nothing.
+TEST(JointSpace, ResidualNodeOnTheCircle) {
+  const std::string train = TempPath("js_res_train.csv"), test = TempPath("js_res_test.csv");
+  SummaryJson(RunDiffdyn(
+      "collect --system pendulum --trajectories 20 --seconds 2 --seed 5 --quiet --json --out " +
+      train));
+  SummaryJson(RunDiffdyn(
+      "collect --system pendulum --trajectories 5 --seconds 2 --seed 6 --quiet --json --out " +
+      test));
+  const std::string model = TempPath("js_res_node.json");
+  SummaryJson(RunDiffdyn(
+      "train --data " + train +
+      " --model res-node --hidden 32 --steps 3 --epochs 300 --lr 3e-3 --batch 100 --seed 1 "
+      "--quiet --json --out " +
+      model));
+  std::ifstream file(model);
+  const nlohmann::json j = nlohmann::json::parse(file);
+  EXPECT_EQ(j.at("system").at("angle_features"), "raw") << j.at("system").dump();
+  const auto e = SummaryJson(RunDiffdyn("eval --model " + model + " --data " + test + " --json"));
+  EXPECT_LT(e.at("single_step_loss").get<double>(),
+            0.1 * e.at("baseline_single_step_loss").get<double>());
+
+  const std::string refused = TempPath("js_res_sincos.json");
+  const auto r = RunDiffdyn("train --data " + train +
+                            " --model res-node --angle-features sincos --quiet --out " + refused);
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_EQ(CountLines(r.err), 1) << r.err;
+  EXPECT_NE(r.err.find("--angle-features"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(refused));
+}
+
 // The extended model diagnose writes for the real Panda log predicts the log's
 // transitions (each over its own dt) better than the nominal model.
 TEST(JointSpace, EvalTakesDiagnosesExtendedModelOnThePandaLog) {
   const std::string out = TempPath("js_panda_diagnosis");
-  ASSERT_EQ(RunDiffdyn("diagnose --model panda --measured " + kPanda + " --quiet --out " + out).exit_code, 0);
+  ASSERT_EQ(
+      RunDiffdyn("diagnose --model panda --measured " + kPanda + " --quiet --out " + out).exit_code,
+      0);
   // The first 3000 samples (3 s) keep the test short.
   JointData log = ReadMeasured(kPanda);
   const int keep = 3000;

@@ -66,6 +66,7 @@ LearnedModelConfig ConfigOf(const Case& c) {
   config.hidden = 9;
   config.activation = Activation::Tanh();
   config.system = c.pendulum ? PendulumLike() : SystemDescription::Unnamed(5, 2);
+  config.system.angle_features = DefaultAngleFeatures(c.type);
   if (c.scaled) config.scaling = SomeScaling(config, 11);
   return config;
 }
@@ -175,8 +176,9 @@ TEST_P(AnySystem, JacobianMatchesDifferencesAndReverseMode) {
   EXPECT_THROW(any.Jacobian(Eigen::VectorXd::Zero(n + 1), u, &jac), Error);
 }
 
-// With the angle seen as (sin, cos), shifting it by 2 pi changes no prediction but
-// the angle itself, and that by a whole turn (0 for abs-nn, 2 pi for the others).
+// With the angle seen as (sin, cos), or (res-node) the flow started from the wrapped
+// angle, shifting it by 2 pi changes no prediction but the angle itself, and that by
+// a whole turn (0 for abs-nn, 2 pi for the others).
 TEST_P(AnySystem, PeriodicInTheEncodedAngle) {
   if (!GetParam().pendulum) GTEST_SKIP() << "no encoded angle";
   const LearnedModel model = LearnedModel::Initialized(ConfigOf(GetParam()), 7);
@@ -187,6 +189,26 @@ TEST_P(AnySystem, PeriodicInTheEncodedAngle) {
   const double turns = (b[0] - a[0]) / (2 * std::numbers::pi);
   EXPECT_NEAR(turns, std::round(turns), 1e-9);
   EXPECT_NEAR(b[1], a[1], 1e-9);
+}
+
+// res-node starts its flow from the wrapped angle: ten turns out, the batched and
+// templated paths both give the prediction at the wrapped angle plus ten turns, and
+// a periodic (sin, cos) field is refused.
+TEST(ResNode, StartsFromTheWrappedAngle) {
+  const LearnedModel model = LearnedModel::Initialized(ConfigOf({LearnedKind::kResNode, true}), 3);
+  const double turns = 20 * std::numbers::pi;
+  const Eigen::Vector2d near(0.7, -1.3), far(0.7 + turns, -1.3);
+  const Eigen::Matrix<double, 1, 1> u(0.4);
+  const Eigen::VectorXd expected = model.Predict(near, u) + Eigen::Vector2d(turns, 0.0);
+  auto ws = model.MakeWorkspace(1);
+  Eigen::MatrixXd batched(2, 1);
+  model.PredictBatch(far, u, batched, *ws);
+  EXPECT_LT((model.Predict(far, u) - expected).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_LT((batched.col(0) - expected).cwiseAbs().maxCoeff(), 1e-12);
+  LearnedModelConfig periodic = ConfigOf({LearnedKind::kResNode, true});
+  periodic.system.angle_features = AngleFeatures::kSinCos;
+  EXPECT_THROW(periodic.Validate(), Error);
+  EXPECT_EQ(DefaultAngleFeatures(LearnedKind::kAbsNode), AngleFeatures::kSinCos);
 }
 
 INSTANTIATE_TEST_SUITE_P(
@@ -274,8 +296,7 @@ TEST(LearnedModelFile, KeepsScalingsAndRefusesBadOnes) {
 }
 
 // FitScaling's input map takes the features of the fitting data to mean 0 and
-// standard deviation 1; its output map is the moments of the network's target (none
-// for res-node).
+// standard deviation 1; its output map is the moments of the network's target.
 TEST(FitScaling, MakesTheDataUnitScale) {
   LearnedModelConfig config = ConfigOf({LearnedKind::kResNn, /*pendulum=*/true});
   Rng rng(12);
@@ -298,9 +319,25 @@ TEST(FitScaling, MakesTheDataUnitScale) {
   EXPECT_EQ(config.scaling.output_scale[0], 1.0);
   EXPECT_NEAR(config.scaling.output_shift[1], 0.05, 0.03);
   EXPECT_NEAR(config.scaling.output_scale[1], 0.2, 0.03);
-  // res-node's field is not scaled (FitScaling's comment).
+  // res-node's field carries z from wrap(x_t) to x_{t+1} - x_t: row 1's target is
+  // 0.05 + 0.2 N(0, 1) - (3 + 10 N(0, 1)) (x's row 1 is no angle, so not wrapped).
   config.type = LearnedKind::kResNode;
-  EXPECT_FALSE(FitScaling(config, x, u, next).has_output());
+  config.system.angle_features = AngleFeatures::kRaw;
+  const Scaling res_node = FitScaling(config, x, u, next);
+  ASSERT_EQ(res_node.output_scale.size(), 3);
+  EXPECT_NEAR(res_node.output_shift[1], 0.05 - 3.0, 0.5);
+  EXPECT_NEAR(res_node.output_scale[1], 10.0, 1.0);
+  EXPECT_EQ(res_node.output_scale[2], 1.0);  // the action rides along
+  // Its input and output moments are those of the wrapped angle: three turns out
+  // changes nothing.
+  Eigen::MatrixXd turned = x, turned_next = next;
+  turned.row(0).array() += 6 * std::numbers::pi;
+  turned_next.row(0).array() += 6 * std::numbers::pi;
+  const Scaling turned_scaling = FitScaling(config, turned, u, turned_next);
+  EXPECT_LT((turned_scaling.input_shift - res_node.input_shift).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_LT((turned_scaling.input_scale - res_node.input_scale).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_LT((turned_scaling.output_shift - res_node.output_shift).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((turned_scaling.output_scale - res_node.output_scale).cwiseAbs().maxCoeff(), 1e-9);
 }
 
 TEST(SystemDescription, ValidatesAndRoundTripsThroughJson) {

@@ -42,7 +42,7 @@ LearnedModelConfig FloatCaseConfig(const PrecisionCase& c) {
   config.system.state_names = {"q1", "qd1"};
   config.system.action_names = {"tau1"};
   config.system.angles = {0};
-  config.system.angle_features = AngleFeatures::kSinCos;
+  config.system.angle_features = DefaultAngleFeatures(c.type);
   const MlpArchitecture arch = config.Architecture();
   const int f = arch.sizes.front(), o = arch.sizes.back();
   config.scaling = {Eigen::VectorXd::Constant(f, 0.1), Eigen::VectorXd::Constant(f, 1.5),

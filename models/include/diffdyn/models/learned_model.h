@@ -7,12 +7,23 @@
 //   abs-nn     F = N(phi([x; u]))              N: MLP f-h-h-n
 //   res-nn     F = x + N(phi([x; u]))
 //   abs-node   F = P z(1)                      z(0) = [x; u] in R^(n+m),  dz/dt = M(phi(z)),
-//   res-node   F = x + P z(1)                  M: MLP f-h-h-(n+m),  P = [I_n 0]
+//   res-node   F = x + P z(1)                  z(0) = [wrap(x); u],  M: MLP f-h-h-(n+m),
+//                                              P = [I_n 0]
 //
 // phi is the description's feature map: the identity, except that with
 // angle_features = sincos each angle component x_i becomes (sin x_i, cos x_i), so f =
 // n + m + (number of angles). The NeuralODE is autonomous and the action rides along
-// as ODE state; the ODE state stays the raw [x; u], only the network sees features.
+// as ODE state; the ODE state stays [x; u], only the network sees features.
+//
+// res-node on angles. Its flow must carry z from x_t to x_{t+1} - x_t, i.e. move each
+// angle by about -x_i. A field periodic in x_i (sin/cos features) moves x_i and
+// x_i + 2 pi by the same amount, so no such field can do that on the whole circle;
+// and a raw angle of many turns would make the move unbounded. So res-node starts
+// from wrap(x), each angle component wrapped to (-pi, pi] (the identity on states
+// that are not angles or already lie there), and needs raw angle features
+// (LearnedModelConfig::Validate). F stays x_t + P z(1) exactly, and shifting an
+// angle by 2 pi shifts the prediction by 2 pi. wrap has derivative 1 almost
+// everywhere, so gradients are those of the unwrapped start.
 // z(1) comes from one Runge-Kutta method (butcher.h) on t in [0, 1]: a fixed-step
 // method takes steps - 1 equal steps h = 1 / (steps - 1) (`steps` grid points, as the
 // paper's torch.linspace(0, 1, steps)); dopri5 is adaptive with abs = rel tolerance
@@ -119,6 +130,28 @@ inline bool IsResidual(LearnedKind type) {
   return type == LearnedKind::kResNn || type == LearnedKind::kResNode;
 }
 
+/// Whether `type` starts its flow from the wrapped angles (res-node; file comment).
+inline bool StartsFromWrappedAngles(LearnedKind type) { return type == LearnedKind::kResNode; }
+
+/// How `type` sees angles unless told otherwise: raw for res-node, whose field must
+/// not be periodic (file comment), (sin, cos) for the others.
+inline AngleFeatures DefaultAngleFeatures(LearnedKind type) {
+  return StartsFromWrappedAngles(type) ? AngleFeatures::kRaw : AngleFeatures::kSinCos;
+}
+
+/// a wrapped to (-pi, pi] on any scalar: a double, or a Jet whose value is wrapped
+/// and whose derivative parts are kept (the wrap's derivative is 1).
+template <typename T>
+T WrappedAngle(const T& a) {
+  if constexpr (std::is_same_v<T, double>) {
+    return WrapAngle(a);
+  } else {
+    T w = a;
+    w.a = WrapAngle(a.a);
+    return w;
+  }
+}
+
 /// Affine maps around a learned model's network (see the file comment): the network
 /// input is (phi - input_shift) / input_scale (f entries each), its output
 /// output_shift + output_scale * MLP (the MLP's outputs each). Empty vectors: identity.
@@ -189,6 +222,10 @@ struct LearnedModelConfig {
                   "] (grid points on [0, 1]), got ", steps);
     DIFFDYN_CHECK(tolerance > 0 && std::isfinite(tolerance), "tolerance must be positive, got ",
                   tolerance);
+    DIFFDYN_CHECK(!(StartsFromWrappedAngles(type) && system.encodes_angles()),
+                  LearnedKindName(type),
+                  ": angles must be raw features (--angle-features raw): a field periodic in an "
+                  "angle cannot carry it to x_{t+1} - x_t");
     const MlpArchitecture arch = Architecture();
     scaling.Validate(arch.sizes.front(), arch.sizes.back());
   }
@@ -471,6 +508,9 @@ VectorX<R> PredictLearned(const Mlp<P>& net, const LearnedModelConfig& config,
   VectorX<R> z(n + m);
   for (int i = 0; i < n; ++i) z[i] = R(x[i]);
   for (int i = 0; i < m; ++i) z[n + i] = R(u[i]);
+  if (StartsFromWrappedAngles(config.type)) {
+    for (int i : config.system.angles) z[i] = WrappedAngle(z[i]);
+  }
   VectorX<R> out(n);
   if (IsNeuralOde(config.type)) {
     const MlpOdeFunction<P> f{&net, &features, &output};
@@ -485,16 +525,14 @@ VectorX<R> PredictLearned(const Mlp<P>& net, const LearnedModelConfig& config,
   return out;
 }
 
-/// The scaling that puts a model's network inputs (and, but for res-node, outputs) on
-/// unit scale for the transitions (states, actions, next) (n x N, m x N, n x N, N >= 1):
-/// the input shift and scale are the mean and standard deviation of phi([x; u]); the
-/// output's those of what the network must produce: x_{t+1} (abs-nn), x_{t+1} - x_t
-/// (res-nn, and abs-node's flow over unit time: its field's mean); the action part of
-/// a NeuralODE's output keeps shift 0 and scale 1. res-node gets no output scaling: its
-/// flow must carry z from x_t to x_{t+1} - x_t, so its field is no constant rate, and
-/// scaling it by the moments of x_{t+1} - 2 x_t made it worse than no scaling on the
-/// cart-pole (README, "Dynamics models"). A standard deviation below 1e-8 (1 + |mean|)
-/// (a constant) becomes 1.
+/// The scaling that puts a model's network inputs and outputs on unit scale for the
+/// transitions (states, actions, next) (n x N, m x N, n x N, N >= 1): the input shift
+/// and scale are the mean and standard deviation of phi(z(0)), z(0) = [x; u] (res-node:
+/// [wrap(x); u]); the output's those of what the network must produce: x_{t+1}
+/// (abs-nn), x_{t+1} - x_t (res-nn, and abs-node's flow over unit time: its field's
+/// mean), x_{t+1} - x_t - wrap(x_t) (res-node's flow from wrap(x_t) to x_{t+1} - x_t);
+/// the action part of a NeuralODE's output keeps shift 0 and scale 1. A standard
+/// deviation below 1e-8 (1 + |mean|) (a constant) becomes 1.
 Scaling FitScaling(const LearnedModelConfig& config,
                    const Eigen::Ref<const Eigen::MatrixXd>& states,
                    const Eigen::Ref<const Eigen::MatrixXd>& actions,

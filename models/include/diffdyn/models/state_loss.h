@@ -20,7 +20,6 @@
 #pragma once
 
 #include <cmath>
-#include <numbers>
 
 #include <Eigen/Core>
 
@@ -28,13 +27,6 @@
 #include "diffdyn/models/system_description.h"
 
 namespace diffdyn {
-
-/// a wrapped to (-pi, pi].
-inline double WrapAngle(double a) {
-  double w = std::remainder(a, 2.0 * std::numbers::pi);
-  if (w <= -std::numbers::pi) w += 2.0 * std::numbers::pi;
-  return w;
-}
 
 /// L = scale sum_b sum_i w_i d_ib^2 over pred - target (n x B each, see the file
 /// comment); if grad is not null, grad = dL/dpred (n x B, resized only if its size

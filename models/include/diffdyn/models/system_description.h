@@ -20,6 +20,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <string>
 #include <vector>
 
@@ -30,6 +31,13 @@
 #include "diffdyn/models/json_io.h"
 
 namespace diffdyn {
+
+/// a wrapped to (-pi, pi].
+inline double WrapAngle(double a) {
+  double w = std::remainder(a, 2.0 * std::numbers::pi);
+  if (w <= -std::numbers::pi) w += 2.0 * std::numbers::pi;
+  return w;
+}
 
 /// How a learned model sees the angle components of its input.
 enum class AngleFeatures {
