@@ -15,11 +15,6 @@
 namespace diffdyn {
 namespace {
 
-// The angle rows of z (z's top rows are states) wrapped to (-pi, pi].
-void WrapAngleRows(const SystemDescription& system, Eigen::MatrixXd& z) {
-  for (int i : system.angles) z.row(i) = z.row(i).unaryExpr([](double a) { return WrapAngle(a); });
-}
-
 // input's angle rows = the wrapped angle rows of states (wrapped in double, then rounded to S).
 template <typename S>
 void WrapAngleRows(const SystemDescription& system, const Eigen::Ref<const Eigen::MatrixXd>& states,
@@ -55,7 +50,7 @@ Scaling FitScaling(const LearnedModelConfig& config,
   Eigen::MatrixXd z(n + m, states.cols()), phi;
   z.topRows(n) = states;
   z.bottomRows(m) = actions;
-  if (StartsFromWrappedAngles(config.type)) WrapAngleRows(config.system, z);
+  if (StartsFromWrappedAngles(config.type)) WrapAngleRows(config.system, states, z);
   FeatureMap(config.system).Apply(z, phi);
   moments(phi, scaling.input_shift, scaling.input_scale);
   // What the network must output: x_{t+1}; else x_{t+1} - x_t (the NeuralODE's field: its
