@@ -15,16 +15,17 @@
 #include <string>
 
 #include "diffdyn/models/delan.h"
+#include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/delan_training.h"
 
 namespace diffdyn {
 namespace {
 
-const JointData& TrainingSamples() {
-  static const JointData data = [] {
+const DelanSamples& TrainingSamples() {
+  static const DelanSamples data = [] {
     const char* env = std::getenv("DIFFDYN_DELAN_DATA");
     const std::string path = env ? env : "../shared/data/delan_characters";
-    return SplitForDelan(ReadMeasured(path), 0.2, 0).train;
+    return SplitForDelan(ReadDataset(path), 0.2, 0).train;
   }();
   return data;
 }
@@ -32,13 +33,13 @@ const JointData& TrainingSamples() {
 constexpr int kEpochs = 50;
 
 void BM_DelanEpoch(benchmark::State& state) {
-  const JointData& train = TrainingSamples();
+  const DelanSamples& train = TrainingSamples();
   Delan model = Delan::Initialized({.dof = 2}, 0);
   TrainOptions options = DelanTrainDefaults();
   options.epochs = kEpochs;
   options.progress = false;
   options.threads = static_cast<int>(state.range(0));
-  const JointData none;
+  const DelanSamples none;
   for (auto _ : state) TrainDelan(&model, train, none, options);
   const auto per = [](double count) {
     return benchmark::Counter(count, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);

@@ -79,7 +79,7 @@ void RunJointCollect(const CollectArgs& args) {
     throw Error(StrCat("--effect: ", e.what()));
   }
   const auto t0 = std::chrono::steady_clock::now();
-  Dataset data = CollectJointData(task, options);
+  Dataset data = CollectJointSpace(task, options);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   bar.Finish();
   data.path = args.out;

@@ -39,7 +39,7 @@ int main(int argc, char** argv) {
   const std::vector<std::string> nominal_params = plant.params;
   plant.effects.push_back(ParseEffectSpec(fmt::format("coulomb:1={}", hidden), "example"));
   const std::string log = (out / "pendulum_log.csv").string();
-  WriteDataset(log, CollectJointData(plant, {.trajectories = quick ? 10 : 40, .seed = 7, .threads = 2}));
+  WriteDataset(log, CollectJointSpace(plant, {.trajectories = quick ? 10 : 40, .seed = 7, .threads = 2}));
 
   // The diagnosis: the nominal model and the log, nothing else.
   DiagnoseRequest request{.model = plant.model, .measured = log, .out = (out / "diagnosis").string()};

@@ -26,7 +26,7 @@ int main(int argc, char** argv) {
   const ControlTask task = ControlTaskByName("pendulum");
 
   // The learned model (train_neuralode_joint_csv.cc explains these steps).
-  const Dataset data = CollectJointData(task.plant, {.trajectories = quick ? 40 : 100, .seed = 1, .threads = 2});
+  const Dataset data = CollectJointSpace(task.plant, {.trajectories = quick ? 40 : 100, .seed = 1, .threads = 2});
   const LearnedModel model = FitLearnedModel(data, {.type = LearnedKind::kAbsNode, .hidden = 64, .steps = 3},
                                              {.epochs = quick ? 40 : 100, .seed = 1, .progress = false})
                                  .model;

@@ -37,8 +37,8 @@ int main(int argc, char** argv) {
   const JointTask task = JointTaskByName("pendulum");
   const std::string train_csv = (out / "pendulum_train.csv").string();
   const std::string test_csv = (out / "pendulum_test.csv").string();
-  WriteDataset(train_csv, CollectJointData(task, {.trajectories = quick ? 30 : 100, .seed = 1, .threads = 2}));
-  WriteDataset(test_csv, CollectJointData(task, {.trajectories = 20, .seed = 2, .threads = 2}));
+  WriteDataset(train_csv, CollectJointSpace(task, {.trajectories = quick ? 30 : 100, .seed = 1, .threads = 2}));
+  WriteDataset(test_csv, CollectJointSpace(task, {.trajectories = 20, .seed = 2, .threads = 2}));
 
   // 2. Read the CSV as any user's log would be read.
   const Dataset data = ReadDataset(train_csv);

@@ -12,7 +12,7 @@
 #include <fstream>
 
 #include "diffdyn/autodiff_ode/check.h"
-#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/solvers/dataset_io.h"
 #include "fuzz_input.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -47,7 +47,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       input = diffdyn::fuzz::WriteBytes(folder / "log.csv", data, size);
   }
   try {
-    (void)diffdyn::ReadMeasured(input);
+    (void)diffdyn::ReadDataset(input);
   } catch (const diffdyn::Error&) {
   }
   return 0;

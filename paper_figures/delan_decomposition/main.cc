@@ -46,7 +46,6 @@
 #include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/delan_training.h"
 #include "diffdyn/solvers/joint_collect.h"
-#include "diffdyn/solvers/joint_data.h"
 #include "diffdyn/solvers/multiple_shooting.h"
 
 namespace fs = std::filesystem;
@@ -75,7 +74,7 @@ struct FeedForward {
 };
 
 // The feed-forward baseline with DeLaN's optimiser settings and loss.
-FeedForward TrainFeedForward(const JointData& train, const JointData& test, const TrainOptions& options,
+FeedForward TrainFeedForward(const DelanSamples& train, const DelanSamples& test, const TrainOptions& options,
                              std::uint64_t seed, const InputFeatures& features = {}) {
   const int n = train.dof();
   const MlpArchitecture arch{{features.size(n) + 2 * n, 64, 64, n},
@@ -105,7 +104,7 @@ FeedForward TrainFeedForward(const JointData& train, const JointData& test, cons
 }
 
 // The feed-forward network's parts by the authors' trick.
-DelanParts FeedForwardParts(const FeedForward& ff, const JointData& d) {
+DelanParts FeedForwardParts(const FeedForward& ff, const DelanSamples& d) {
   const Eigen::MatrixXd zero = Eigen::MatrixXd::Zero(d.dof(), d.size());
   DelanParts p;
   p.torque = ff.Predict(d.q, d.qd, d.qdd);
@@ -131,8 +130,8 @@ std::vector<std::uint64_t> ParseSeeds(const std::string& text) {
 
 void Run(const std::string& data_path, const std::string& out, const std::vector<std::uint64_t>& seeds,
          TrainOptions options) {
-  const DelanSplit split = SplitForDelan(ReadMeasured(data_path), 0.2, 0);
-  const JointData& test = split.test;
+  const DelanSplit split = SplitForDelan(ReadDataset(data_path), 0.2, 0);
+  const DelanSamples& test = split.test;
   std::ostringstream scores;
   scores.precision(6);
   scores << "model,seed,torque_mse,inertial_mse,coriolis_mse,gravity_mse,power_mse,min_mass_eigenvalue,"
@@ -196,26 +195,26 @@ void Run(const std::string& data_path, const std::string& out, const std::vector
 // ---- (b) the cart-pole ----
 
 // Writes `data` to dir/NAME.csv and reads it back as `diffdyn train` would.
-JointData ThroughFile(const fs::path& dir, const std::string& name, const Dataset& data) {
+Dataset ThroughFile(const fs::path& dir, const std::string& name, const Dataset& data) {
   const std::string path = (dir / (name + ".csv")).string();
   WriteDataset(path, data);
-  return ReadMeasured(path);
+  return ReadDataset(path);
 }
 
-// The cart-pole task's data: both joints excited (`all`) or only the cart.
-JointData CollectCartpole(const fs::path& dir, const std::string& name, bool all, int trajectories,
-                          std::uint64_t seed, int threads) {
+// The cart-pole task's samples: both joints excited (`all`) or only the cart.
+DelanSamples CollectCartpole(const fs::path& dir, const std::string& name, bool all, int trajectories,
+                             std::uint64_t seed, int threads) {
   JointTask task = ControlTaskByName("cartpole").plant;
   if (all) task = task.ActuatingAll();
   JointCollectOptions o;
   o.trajectories = trajectories;
   o.seed = seed;
   o.threads = threads > 0 ? threads : 2;
-  return ThroughFile(dir, name, CollectJointData(task, o));
+  return SamplesOf(ThroughFile(dir, name, CollectJointSpace(task, o)));
 }
 
 // A swing-up by multiple shooting from the task's start of `seed`, with ground truth.
-JointData SwingUp(const fs::path& dir, std::uint64_t seed, bool* success) {
+Dataset SwingUp(const fs::path& dir, std::uint64_t seed, bool* success) {
   const ControlTask task = ControlTaskByName("cartpole");
   MultipleShootingController controller(task, MultipleShootingOptions{});
   EvaluationOptions eval;
@@ -262,7 +261,7 @@ void WriteScoreRow(std::ostream& out, const std::string& train, const std::strin
 }
 
 // DESIGN.md's scores of `model` on `test` plus its friction coefficients.
-std::map<std::string, double> CartpoleScores(const Delan& model, const JointData& test) {
+std::map<std::string, double> CartpoleScores(const Delan& model, const DelanSamples& test) {
   std::map<std::string, double> e = ScoreDelan(model, test);
   for (int j = 0; j < model.dof(); ++j) {
     e[StrCat("viscous_", j + 1)] = model.viscous()[j];
@@ -273,7 +272,7 @@ std::map<std::string, double> CartpoleScores(const Delan& model, const JointData
 
 // The feed-forward network's nmse; its c (by the trick) holds friction too, so it
 // is scored against c + f.
-std::map<std::string, double> FeedForwardScores(const FeedForward& ff, const JointData& test) {
+std::map<std::string, double> FeedForwardScores(const FeedForward& ff, const DelanSamples& test) {
   const DelanParts p = FeedForwardParts(ff, test);
   return {{"torque_nmse", NormalizedMse(p.torque, test.tau)},
           {"inertial_nmse", NormalizedMse(p.inertial, test.channels.at("m"))},
@@ -282,8 +281,15 @@ std::map<std::string, double> FeedForwardScores(const FeedForward& ff, const Joi
 }
 
 // The swing-up time series: truth, DeLaN on both sets and the feed-forward parts.
-void WriteCartpoleSeries(const fs::path& path, const JointData& d, const Delan& full, const Delan& under,
+void WriteCartpoleSeries(const fs::path& path, const Dataset& run, const Delan& full, const Delan& under,
                          const FeedForward& ff) {
+  const DelanSamples d = SamplesOf(run);
+  Eigen::VectorXd times(d.size());
+  for (Eigen::Index i = 0, k = 0; i < static_cast<Eigen::Index>(run.trajectories.size()); ++i) {
+    const Eigen::VectorXd& t = run.trajectories[i].t;
+    times.segment(k, t.size()) = t;
+    k += t.size();
+  }
   DelanWorkspace ws;
   const DelanParts pf = full.Decompose(d.q, d.qd, d.qdd, &ws), pu = under.Decompose(d.q, d.qd, d.qdd, &ws);
   const DelanParts pff = FeedForwardParts(ff, d);
@@ -314,7 +320,7 @@ void WriteCartpoleSeries(const fs::path& path, const JointData& d, const Delan& 
       for (const char* w : {"true", "full", "under"}) f << ',' << e << '_' << w;
     f << '\n';
     for (int i = 0; i < d.size(); ++i) {
-      f << d.t[i];
+      f << times[i];
       for (const auto& [name, who] : parts)
         for (const Eigen::MatrixXd* m : who)
           for (int j = 0; j < d.dof(); ++j) {
@@ -336,12 +342,13 @@ void RunCartpole(const std::string& out, const CartpoleOptions& c, TrainOptions 
   const fs::path dir = fs::path(out) / "data";
   fs::create_directories(dir);
   const int threads = options.threads;
-  const JointData full_train = CollectCartpole(dir, "full_train", true, c.train_trajectories, 1, threads);
-  const JointData full_test = CollectCartpole(dir, "full_test", true, c.test_trajectories, 2, threads);
-  const JointData under_train = CollectCartpole(dir, "under_train", false, c.train_trajectories, 1, threads);
-  const JointData under_test = CollectCartpole(dir, "under_test", false, c.test_trajectories, 2, threads);
+  const DelanSamples full_train = CollectCartpole(dir, "full_train", true, c.train_trajectories, 1, threads);
+  const DelanSamples full_test = CollectCartpole(dir, "full_test", true, c.test_trajectories, 2, threads);
+  const DelanSamples under_train = CollectCartpole(dir, "under_train", false, c.train_trajectories, 1, threads);
+  const DelanSamples under_test = CollectCartpole(dir, "under_test", false, c.test_trajectories, 2, threads);
   bool swung = false;
-  const JointData swing = c.swing_up ? SwingUp(dir, 1, &swung) : full_test;
+  const Dataset swing_run = c.swing_up ? SwingUp(dir, 1, &swung) : ReadDataset((dir / "full_test.csv").string());
+  const DelanSamples swing = SamplesOf(swing_run);
   std::printf("swing-up by multiple shooting (start seed 1): %s, %d samples\n",
               c.swing_up ? (swung ? "success" : "not swung up") : "skipped (--quick)", swing.size());
   Delan full = Delan::Initialized(CartpoleDelanOptions(), options.seed);
@@ -363,7 +370,7 @@ void RunCartpole(const std::string& out, const CartpoleOptions& c, TrainOptions 
   WriteFileAtomically(fs::path(out) / "cartpole_scores.csv", [&](std::ostream& f) { f << scores.str(); });
   SaveDelan(fs::path(out) / "data" / "cartpole_delan_full.json", full);
   SaveDelan(fs::path(out) / "data" / "cartpole_delan_under.json", under);
-  WriteCartpoleSeries(fs::path(out) / "cartpole_timeseries.csv", swing, full, under, ff);
+  WriteCartpoleSeries(fs::path(out) / "cartpole_timeseries.csv", swing_run, full, under, ff);
   std::printf("wrote %s/cartpole_scores.csv and %s/cartpole_timeseries.csv\n", out.c_str(), out.c_str());
 }
 

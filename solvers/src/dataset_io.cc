@@ -7,6 +7,7 @@
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/physics/pushing/csv.h"
 #include "diffdyn/physics/pushing/system.h"
+#include "joint_space_csv.h"
 
 namespace diffdyn {
 namespace {
@@ -49,45 +50,6 @@ SystemDescription JointSpaceSystem(int n, const JointLayout& layout) {
   return s;
 }
 
-Dataset JointDataset(const JointData& data, const JointLayout& layout) {
-  const int n = data.dof();
-  JointLayout resolved = layout;
-  if (!layout.all_actuated && layout.actuated.empty()) {
-    // The joints whose torque is not zero throughout.
-    for (int j = 0; j < n; ++j) {
-      if (!data.tau.row(j).isZero(0.0)) resolved.actuated.push_back(j + 1);
-    }
-  }
-  Dataset d;
-  d.system = JointSpaceSystem(n, resolved);
-  d.path = data.path;
-  d.format = data.format == "csv" ? "joint-csv" : data.format;
-  // Action row r takes the torque of joint action_joint[r].
-  std::vector<int> action_joint;
-  for (const std::string& name : d.system.action_names) action_joint.push_back(std::stoi(name.substr(3)) - 1);
-  std::vector<int> starts = data.segment_starts;
-  starts.push_back(data.size());
-  for (std::size_t s = 0; s + 1 < starts.size(); ++s) {
-    const int a = starts[s], samples = starts[s + 1] - starts[s];
-    Trajectory t;
-    t.label = s < data.segment_labels.size() ? data.segment_labels[s] : std::to_string(s);
-    t.t = data.t.segment(a, samples);
-    t.states.resize(2 * n, samples);
-    t.states.topRows(n) = data.q.middleCols(a, samples);
-    t.states.bottomRows(n) = data.qd.middleCols(a, samples);
-    t.actions.resize(static_cast<Eigen::Index>(action_joint.size()), samples - 1);
-    for (std::size_t r = 0; r < action_joint.size(); ++r) {
-      t.actions.row(static_cast<Eigen::Index>(r)) = data.tau.row(action_joint[r]).segment(a, samples - 1);
-    }
-    t.channels["tau"] = data.tau.middleCols(a, samples);
-    if (data.qdd.cols() == data.size()) t.channels["qdd"] = data.qdd.middleCols(a, samples);
-    for (const auto& [name, values] : data.channels) t.channels[name] = values.middleCols(a, samples);
-    d.trajectories.push_back(std::move(t));
-  }
-  d.Validate();
-  return d;
-}
-
 Dataset ReadDataset(const std::string& path, const JointLayout& layout) {
   if (IsPushingCsv(path)) {
     Dataset d;
@@ -98,7 +60,7 @@ Dataset ReadDataset(const std::string& path, const JointLayout& layout) {
     DIFFDYN_CHECK(!d.trajectories.empty(), path, ": no trajectories");
     return d;
   }
-  return JointDataset(ReadMeasured(path), layout);
+  return ReadJointSpace(path, layout);
 }
 
 Dataset DatasetForModel(const Dataset& data, const SystemDescription& model, const std::string& what) {
@@ -144,39 +106,7 @@ void WriteDataset(const std::string& path, const Dataset& data) {
     WritePushingCsvFile(path, data.trajectories);
     return;
   }
-  const int n = data.system.state_size() / 2;
-  DIFFDYN_CHECK(n >= 1 && data.system.state_size() == 2 * n, path,
-                ": a joint-space CSV needs states [q; qd], got ", data.system.state_size(), " components");
-  JointData j;
-  j.path = path;
-  int count = 0;
-  for (const Trajectory& t : data.trajectories) count += static_cast<int>(t.states.cols());
-  j.t.resize(count);
-  j.q.resize(n, count);
-  j.qd.resize(n, count);
-  j.tau.resize(n, count);
-  j.segment_starts.clear();
-  int k = 0;
-  for (const Trajectory& t : data.trajectories) {
-    const int samples = static_cast<int>(t.states.cols());
-    j.segment_starts.push_back(k);
-    j.segment_labels.push_back(t.label);
-    j.t.segment(k, samples) = t.t;
-    j.q.middleCols(k, samples) = t.states.topRows(n);
-    j.qd.middleCols(k, samples) = t.states.bottomRows(n);
-    const auto tau = t.channels.find("tau");
-    DIFFDYN_CHECK(tau != t.channels.end() && tau->second.rows() == n, path,
-                  ": trajectory ", t.label, " has no channel 'tau' of ", n, " rows");
-    j.tau.middleCols(k, samples) = tau->second;
-    for (const auto& [name, values] : t.channels) {
-      if (name == "tau") continue;
-      Eigen::MatrixXd& all = name == "qdd" ? j.qdd : j.channels[name];
-      if (all.cols() != count) all.resize(values.rows(), count);
-      all.middleCols(k, samples) = values;
-    }
-    k += samples;
-  }
-  WriteJointCsv(path, j);
+  WriteJointSpaceCsv(path, data);
 }
 
 }  // namespace diffdyn

@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/smoothing.h"
 
 namespace diffdyn {
@@ -31,62 +32,85 @@ double NormalizedMse(const Eigen::MatrixXd& predicted, const Eigen::MatrixXd& tr
   return variance > 0 ? mse / variance : std::numeric_limits<double>::quiet_NaN();
 }
 
-JointData WithAccelerations(const JointData& data) {
-  if (data.qdd.cols() == data.size() && data.qdd.rows() == data.dof()) return data;
-  const SmoothedData s = SmoothJointData(data, 10.0);
-  JointData out = data;
-  out.q = s.q;
-  out.qd = s.qd;
-  out.qdd = s.qdd;
-  out.tau = s.tau;
-  out.notes += " qdd estimated (10 Hz smoothing, as diagnose).";
+DelanSamples SamplesOf(const Dataset& data) {
+  const int n = JointCount(data), count = data.samples();
+  DelanSamples out;
+  out.path = data.path;
+  out.measured_torque = data.IsMeasured("tau");
+  bool has_qdd = true;
+  for (const Trajectory& t : data.trajectories) has_qdd = has_qdd && t.channels.count("qdd");
+  if (!has_qdd) {
+    // Estimated as diagnose does: q, qd, tau smoothed alike, qdd = d/dt of smoothed qd.
+    const SmoothedData s = SmoothJointSpace(data, 10.0);
+    out.q = s.q;
+    out.qd = s.qd;
+    out.qdd = s.qdd;
+    out.tau = s.tau;
+  } else {
+    for (Eigen::MatrixXd* m : {&out.q, &out.qd, &out.qdd, &out.tau}) m->resize(n, count);
+  }
+  // The channels every trajectory has (and, with measured qdd, the raw signals).
+  const Trajectory& first = data.trajectories.front();
+  for (const auto& [name, values] : first.channels) {
+    bool everywhere = name != "tau" && name != "qdd";
+    for (const Trajectory& t : data.trajectories) everywhere = everywhere && t.channels.count(name);
+    if (everywhere) out.channels[name].resize(values.rows(), count);
+  }
+  int a = 0;
+  for (const Trajectory& t : data.trajectories) {
+    const int m = static_cast<int>(t.states.cols());
+    if (has_qdd) {
+      out.q.middleCols(a, m) = t.states.topRows(n);
+      out.qd.middleCols(a, m) = t.states.bottomRows(n);
+      out.qdd.middleCols(a, m) = t.channels.at("qdd");
+      out.tau.middleCols(a, m) = t.channels.at("tau");
+    }
+    for (auto& [name, values] : out.channels) values.middleCols(a, m) = t.channels.at(name);
+    a += m;
+  }
   return out;
 }
 
-JointData SelectSamples(const JointData& data, const std::vector<int>& index) {
-  JointData out;
-  out.path = data.path;
-  out.format = data.format;
-  out.has_qd = data.has_qd;
-  out.has_tau = data.has_tau;
+DelanSamples SelectSamples(const DelanSamples& samples, const std::vector<int>& index) {
   const int count = static_cast<int>(index.size());
   const auto pick = [&](const Eigen::MatrixXd& m) {
     Eigen::MatrixXd r(m.rows(), count);
     for (int i = 0; i < count; ++i) r.col(i) = m.col(index[i]);
     return r;
   };
-  out.t.resize(count);
-  for (int i = 0; i < count; ++i) out.t[i] = i;
-  out.q = pick(data.q);
-  out.qd = pick(data.qd);
-  out.tau = pick(data.tau);
-  if (data.qdd.cols() == data.size()) out.qdd = pick(data.qdd);
-  for (const auto& [name, m] : data.channels) out.channels[name] = pick(m);
-  out.notes = data.notes;
+  DelanSamples out;
+  out.path = samples.path;
+  out.measured_torque = samples.measured_torque;
+  out.q = pick(samples.q);
+  out.qd = pick(samples.qd);
+  out.qdd = pick(samples.qdd);
+  out.tau = pick(samples.tau);
+  for (const auto& [name, m] : samples.channels) out.channels[name] = pick(m);
   return out;
 }
 
-DelanSplit SplitForDelan(const JointData& data, double val_fraction, std::uint64_t seed) {
-  const JointData full = WithAccelerations(data);
+DelanSplit SplitForDelan(const Dataset& data, double val_fraction, std::uint64_t seed) {
+  const DelanSamples all = SamplesOf(data);
   std::vector<int> train, test;
   DelanSplit split;
-  if (data.format == "delan-characters" && !data.segment_labels.empty()) {
-    for (size_t s = 0; s < data.segment_starts.size(); ++s) {
-      const int end = s + 1 < data.segment_starts.size() ? data.segment_starts[s + 1] : data.size();
-      std::vector<int>& side = IsTestCharacter(data.segment_labels[s]) ? test : train;
-      for (int i = data.segment_starts[s]; i < end; ++i) side.push_back(i);
+  if (data.format == "delan-characters") {
+    int a = 0;
+    for (const Trajectory& t : data.trajectories) {
+      std::vector<int>& side = IsTestCharacter(t.label) ? test : train;
+      for (int i = 0; i < t.states.cols(); ++i) side.push_back(a + i);
+      a += static_cast<int>(t.states.cols());
     }
     split.how = "characters e, q, v held out";
   } else {
-    SplitWindows(data.size(), val_fraction, seed, &train, &test);
+    SplitWindows(all.size(), val_fraction, seed, &train, &test);
     std::sort(train.begin(), train.end());
     std::sort(test.begin(), test.end());
     split.how = "seeded split of samples";
   }
   DIFFDYN_CHECK(!train.empty() && !test.empty(), data.path, ": the split leaves ", train.size(),
                 " training and ", test.size(), " held-out samples (--val-fraction ", val_fraction, ")");
-  split.train = SelectSamples(full, train);
-  split.test = SelectSamples(full, test);
+  split.train = SelectSamples(all, train);
+  split.test = SelectSamples(all, test);
   return split;
 }
 
@@ -101,7 +125,7 @@ TrainOptions DelanTrainDefaults() {
   return o;
 }
 
-Eigen::VectorXd BalancedJointWeights(const JointData& train) {
+Eigen::VectorXd BalancedJointWeights(const DelanSamples& train) {
   const Eigen::VectorXd mean = train.tau.rowwise().mean();
   const Eigen::VectorXd var = (train.tau.colwise() - mean).rowwise().squaredNorm() / std::max(1, train.size());
   double largest = 0.0;
@@ -114,17 +138,18 @@ Eigen::VectorXd BalancedJointWeights(const JointData& train) {
   return w;
 }
 
-TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& val,
+TrainResult TrainDelan(Delan* model, const DelanSamples& train, const DelanSamples& val,
                        const TrainOptions& options,
                        const std::function<void(const EpochReport&)>& on_epoch,
                        const Eigen::VectorXd& joint_weights) {
-  for (const JointData* d : {&train, &val}) {
+  for (const DelanSamples* d : {&train, &val}) {
     if (d->size() == 0 && d == &val) continue;
     DIFFDYN_CHECK(d->dof() == model->dof(), d->path, ": ", d->dof(), " joints, the DeLaN has ",
                   model->dof());
-    DIFFDYN_CHECK(d->qdd.cols() == d->size(), d->path, ": DeLaN needs accelerations qdd");
+    DIFFDYN_CHECK(d->qdd.cols() == d->size() && d->tau.cols() == d->size(), d->path,
+                  ": DeLaN needs accelerations qdd and torques tau of every sample");
   }
-  DIFFDYN_CHECK(train.has_tau, train.path, ": no measured torques (free motion); DeLaN learns from torques");
+  DIFFDYN_CHECK(train.measured_torque, train.path, ": no measured torques (free motion); DeLaN learns from torques");
   const int n = model->dof();
   const int batch = std::min(options.batch_size, train.size());
   DelanWorkspace ws, val_ws;
@@ -156,7 +181,7 @@ TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& va
   return result;
 }
 
-std::map<std::string, double> ScoreDelan(const Delan& model, const JointData& data, int threads) {
+std::map<std::string, double> ScoreDelan(const Delan& model, const DelanSamples& data, int threads) {
   DIFFDYN_CHECK(data.dof() == model.dof(), data.path, ": ", data.dof(), " joints, the DeLaN has ",
                 model.dof());
   DIFFDYN_CHECK(data.size() > 0 && data.qdd.cols() == data.size(), data.path,

@@ -173,9 +173,12 @@ HiddenEffectCase GenerateHiddenEffectCase(const std::string& model_name, std::ui
   commands.reserve(control_steps + 1);
   Eigen::VectorXd q, qd, unused;
   ref.At(0.0, q, qd, unused);
-  JointData& data = out.data;
-  data.path = StrCat("hidden-effect case ", model_name, " seed ", seed);
-  data.format = "csv";
+  // The recorded samples; the dataset is made of them at the end.
+  const std::string path = StrCat("hidden-effect case ", model_name, " seed ", seed);
+  struct {
+    Eigen::VectorXd t;
+    Eigen::MatrixXd q, qd, tau;
+  } data;
   data.t.resize(control_steps / record_every + 1);
   data.q.resize(n, data.t.size());
   data.qd.resize(n, data.t.size());
@@ -207,14 +210,18 @@ HiddenEffectCase GenerateHiddenEffectCase(const std::string& model_name, std::ui
     try {
       IntegrateJointMotion(truth, applied, t, t + dt_c, options.substeps, q, qd);
     } catch (const NumericalError& e) {
-      throw NumericalError(StrCat("hidden effects: simulation of ", data.path, " diverged: ", e.what()));
+      throw NumericalError(StrCat("hidden effects: simulation of ", path, " diverged: ", e.what()));
     }
   }
   data.t.conservativeResize(recorded);
   data.q.conservativeResize(n, recorded);
   data.qd.conservativeResize(n, recorded);
   data.tau.conservativeResize(n, recorded);
-  data.segment_starts = {0};
+  JointLayout layout{.all_actuated = true};
+  for (int j = 0; j < n; ++j) {
+    if (model->prismatic(j)) layout.prismatic.push_back(j + 1);
+  }
+  out.data = JointSpaceDataset(path, data.t, data.q, data.qd, data.tau, layout);
   return out;
 }
 

@@ -121,7 +121,7 @@ Trajectory SimulateTrajectory(const JointTask& task, const ExtendedModel& plant,
 
 }  // namespace
 
-Dataset CollectJointData(const JointTask& task, const JointCollectOptions& o) {
+Dataset CollectJointSpace(const JointTask& task, const JointCollectOptions& o) {
   DIFFDYN_CHECK(o.trajectories >= 1, "--trajectories must be at least 1, got ", o.trajectories);
   DIFFDYN_CHECK(o.dt > 0 && std::isfinite(o.dt), "--dt must be positive, got ", o.dt);
   DIFFDYN_CHECK(o.seconds >= 2 * o.dt && std::isfinite(o.seconds), "--seconds must be at least 2 dt (",

@@ -9,9 +9,9 @@
 
 #include "diffdyn/models/io.h"
 #include "diffdyn/physics/model_registry.h"
+#include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/diagnosis/candidates.h"
 #include "diffdyn/solvers/extended_model_file.h"
-#include "diffdyn/solvers/joint_data.h"
 
 namespace diffdyn {
 namespace {
@@ -63,7 +63,7 @@ void WriteResidualCsv(const fs::path& path, const DiagnosisResult& r) {
 }
 
 std::string Report(const DiagnoseRequest& o, const AnalyticModel& model, const Eigen::VectorXd& given,
-                    const JointData& data, const DiagnosisResult& r) {
+                    const Dataset& data, const DiagnosisResult& r) {
   const int n = model.dof();
   std::ostringstream md;
   md << "# diffdyn diagnose: " << model.name() << " on " << data.path << "\n\n";
@@ -93,8 +93,10 @@ std::string Report(const DiagnoseRequest& o, const AnalyticModel& model, const E
      << "**; a purely learned residual on the same split: " << Num(r.heldout_sse_removed_learned, 3) << ".\n\n";
 
   md << "## Data and nominal model\n\n";
-  md << "- data: `" << data.path << "` (" << data.format << "), " << data.size() << " samples, " << n
-     << " joints, " << Num(data.t[data.size() - 1] - data.t[0]) << " s";
+  double seconds = 0;
+  for (const Trajectory& t : data.trajectories) seconds += t.t[t.t.size() - 1] - t.t[0];
+  md << "- data: `" << data.path << "` (" << data.format << "), " << data.samples() << " samples, " << n
+     << " joints, " << Num(seconds) << " s";
   if (!data.notes.empty()) md << "; " << data.notes;
   md << "\n- rows used: " << r.train_rows << " train, " << r.heldout_rows << " held out; independent samples in the "
      << "train part n_eff = " << Num(r.n_eff_train, 3) << "\n";
@@ -185,7 +187,7 @@ ExtendedModel ModelUnderTest(const DiagnoseRequest& o) {
 
 // The measured data's conventions (the file comment of model_diagnosis.h): the
 // pipeline's settings and the nominal parameters it starts from.
-void ApplyDatasetConventions(const JointData& data, const AnalyticModel& model, DiagnosisOptions& pipeline,
+void ApplyDatasetConventions(const Dataset& data, const AnalyticModel& model, DiagnosisOptions& pipeline,
                              Eigen::VectorXd& start) {
   if (data.format == "panda-gaz2019" && pipeline.phase_period <= 0) pipeline.phase_period = 2.0 / 0.15;
   if (data.format == "ibm-double-pendulum" && model.name() == "double-pendulum" && pipeline.fit_params.empty() &&
@@ -193,7 +195,7 @@ void ApplyDatasetConventions(const JointData& data, const AnalyticModel& model, 
     pipeline.fit_params = {"m2"};
     pipeline.scale_params = {"l1", "l2"};
     start[model.ParamIndex("l1")] = 1.0;
-    start[model.ParamIndex("l2")] = data.link_lengths_px[1] / data.link_lengths_px[0];
+    start[model.ParamIndex("l2")] = data.properties.at("link2_px") / data.properties.at("link1_px");
   }
 }
 
@@ -274,8 +276,9 @@ nlohmann::json DiagnoseFiles(const DiagnoseRequest& request) {
   const ExtendedModel under_test = ModelUnderTest(request);
   const auto model = under_test.model_ptr();
   const Eigen::VectorXd params = under_test.params();
-  const JointData data = ReadMeasured(request.measured);
-  DIFFDYN_CHECK(data.dof() == model->dof(), "--measured ", request.measured, " has ", data.dof(),
+  const Dataset data = ReadDataset(request.measured);
+  const int dof = JointCount(data);
+  DIFFDYN_CHECK(dof == model->dof(), "--measured ", request.measured, " has ", dof,
                 " joints but --model ", request.model, " has ", model->dof());
   DIFFDYN_CHECK(!request.out.empty(), "--out: an output folder is needed");
   DiagnosisOptions pipeline = request.pipeline;

@@ -81,12 +81,13 @@ void AddDelanRollouts(const EvalRequest& r, bool test_characters_only, std::map<
 
 nlohmann::json EvaluateDelan(const EvalRequest& r) {
   const Delan model = LoadDelan(r.model);
-  const JointData data = ReadMeasured(r.data);
-  DIFFDYN_CHECK(data.dof() == model.dof(), "--data ", r.data, ": ", data.dof(), " joints, the DeLaN in ", r.model,
-                " has ", model.dof());
+  const Dataset data = ReadDataset(r.data);
+  const int dof = JointCount(data);
+  DIFFDYN_CHECK(dof == model.dof(), "--data ", r.data, ": ", dof, " joints, the DeLaN in ", r.model, " has ",
+                model.dof());
   // The held-out characters on the DeLaN data; every sample elsewhere.
   const bool characters = data.format == "delan-characters";
-  const JointData test = characters ? SplitForDelan(data, 0.2, 0).test : WithAccelerations(data);
+  const DelanSamples test = characters ? SplitForDelan(data, 0.2, 0).test : SamplesOf(data);
   std::map<std::string, double> scores = ScoreDelan(model, test, r.threads);
   if (model.options().friction) {
     for (int j = 0; j < model.dof(); ++j) {

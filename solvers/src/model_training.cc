@@ -10,8 +10,8 @@
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/models/delan.h"
 #include "diffdyn/models/learned_model.h"
+#include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/delan_training.h"
-#include "diffdyn/solvers/joint_data.h"
 #include "diffdyn/solvers/training.h"
 
 namespace diffdyn {
@@ -89,7 +89,7 @@ void CheckTrained(const TrainResult& result, const Eigen::VectorXd& parameters, 
 }
 
 nlohmann::json TrainDelanFiles(const TrainRequest& r) {
-  const JointData data = ReadMeasured(r.data);
+  const Dataset data = ReadDataset(r.data);
   const TrainOptions defaults = DelanTrainDefaults();
   TrainOptions options = defaults;
   options.epochs = r.epochs.value_or(defaults.epochs);
@@ -102,7 +102,7 @@ nlohmann::json TrainDelanFiles(const TrainRequest& r) {
   options.progress = r.progress;
   const DelanSplit split = SplitForDelan(data, r.val_fraction, r.seed);
   DelanOptions arch;
-  arch.dof = data.dof();
+  arch.dof = split.train.dof();
   arch.hidden = r.hidden.value_or(arch.hidden);
   arch.friction = r.model == "delan-friction";
   arch.epsilon = r.mass_epsilon;
@@ -120,7 +120,7 @@ nlohmann::json TrainDelanFiles(const TrainRequest& r) {
       {"n_train", result.n_train},  {"n_val", result.n_val}, {"epochs_run", result.epochs.size()},
       {"joint_weights", std::vector<double>(weights.data(), weights.data() + weights.size())}};
   SaveDelan(r.out, model, provenance, TrainMetrics(result));
-  nlohmann::json summary = TrainSummary(r, result, data.format, model.num_parameters());
+  nlohmann::json summary = TrainSummary(r, result, data.system.name, model.num_parameters());
   summary["loss"] = weights.size() > 0 ? "torque (joints weighted by 1 / variance)" : "torque";
   summary["split"] = split.how;
   summary["dof"] = model.dof();

@@ -4,6 +4,7 @@
 #include <numbers>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/solvers/dataset_io.h"
 
 namespace diffdyn {
 
@@ -11,26 +12,39 @@ double SmoothedData::IndependentRate() const {
   return 1.0 / (2.0 * std::sqrt(std::numbers::pi) * sigma_t);
 }
 
-SmoothedData SmoothJointData(const JointData& data, double cutoff_hz) {
+SmoothedData SmoothJointSpace(const Dataset& data, double cutoff_hz) {
   DIFFDYN_CHECK(cutoff_hz > 0 && std::isfinite(cutoff_hz), "--cutoff-hz ", cutoff_hz,
                 ": must be a positive frequency");
-  const int n = data.dof(), count = data.size();
+  const int n = JointCount(data), count = data.samples();
   SmoothedData out;
   out.cutoff_hz = cutoff_hz;
   out.sigma_t = std::sqrt(std::log(2.0)) / (2.0 * std::numbers::pi * cutoff_hz);
-  out.t = data.t;
-  out.q_raw = data.q;
-  out.qd_raw = data.qd;
-  out.tau_raw = data.tau;
+  // The trajectories side by side: raw signals and segment bounds.
+  bool has_qdd = true;
+  for (const Trajectory& t : data.trajectories) has_qdd = has_qdd && t.channels.count("qdd");
+  out.t.resize(count);
+  out.q_raw.resize(n, count);
+  out.qd_raw.resize(n, count);
+  out.tau_raw.resize(n, count);
+  Eigen::MatrixXd qdd_raw(has_qdd ? n : 0, count);
+  int a = 0;
+  for (const Trajectory& t : data.trajectories) {
+    const int m = static_cast<int>(t.states.cols());
+    out.segment_bounds.push_back(a);
+    out.t.segment(a, m) = t.t;
+    out.q_raw.middleCols(a, m) = t.states.topRows(n);
+    out.qd_raw.middleCols(a, m) = t.states.bottomRows(n);
+    out.tau_raw.middleCols(a, m) = t.channels.at("tau");
+    if (has_qdd) qdd_raw.middleCols(a, m) = t.channels.at("qdd");
+    a += m;
+  }
+  out.segment_bounds.push_back(count);
   out.q.resize(n, count);
   out.qd.resize(n, count);
   out.qdd.resize(n, count);
   out.tau.resize(n, count);
   out.dtau.resize(n, count);
   out.segment_of.assign(count, 0);
-  out.segment_bounds = data.segment_starts;
-  out.segment_bounds.push_back(count);
-  const bool has_qdd = data.qdd.rows() == n && data.qdd.cols() == count;
   const double s = out.sigma_t, reach = 4.0 * s;
 
   for (std::size_t seg = 0; seg + 1 < out.segment_bounds.size(); ++seg) {
@@ -39,15 +53,15 @@ SmoothedData SmoothJointData(const JointData& data, double cutoff_hz) {
     int lo = begin, hi = begin;
     for (int k = begin; k < end; ++k) {
       out.segment_of[k] = static_cast<int>(seg);
-      const double t0 = data.t[k];
-      while (data.t[lo] < t0 - reach) ++lo;
-      while (hi < end && data.t[hi] <= t0 + reach) ++hi;
+      const double t0 = out.t[k];
+      while (out.t[lo] < t0 - reach) ++lo;
+      while (hi < end && out.t[hi] <= t0 + reach) ++hi;
       // Local-linear Gaussian weights alpha (value) and beta (slope).
       const int m = hi - lo;
       Eigen::VectorXd w(m), u(m);
       double s0 = 0, s1 = 0, s2 = 0;
       for (int i = 0; i < m; ++i) {
-        u[i] = data.t[lo + i] - t0;
+        u[i] = out.t[lo + i] - t0;
         w[i] = std::exp(-0.5 * u[i] * u[i] / (s * s));
         s0 += w[i];
         s1 += w[i] * u[i];
@@ -58,14 +72,14 @@ SmoothedData SmoothJointData(const JointData& data, double cutoff_hz) {
                     " s of t = ", t0, "; raise --cutoff-hz or check the time column");
       const Eigen::VectorXd alpha = (w.array() * (s2 - u.array() * s1) / det).matrix();
       const Eigen::VectorXd beta = (w.array() * (u.array() * s0 - s1) / det).matrix();
-      out.q.col(k) = data.q.middleCols(lo, m) * alpha;
-      out.qd.col(k) = data.qd.middleCols(lo, m) * alpha;
-      out.qdd.col(k) = has_qdd ? Eigen::VectorXd(data.qdd.middleCols(lo, m) * alpha)
-                               : Eigen::VectorXd(data.qd.middleCols(lo, m) * beta);
-      out.tau.col(k) = data.tau.middleCols(lo, m) * alpha;
-      out.dtau.col(k) = data.tau.middleCols(lo, m) * beta;
+      out.q.col(k) = out.q_raw.middleCols(lo, m) * alpha;
+      out.qd.col(k) = out.qd_raw.middleCols(lo, m) * alpha;
+      out.qdd.col(k) = has_qdd ? Eigen::VectorXd(qdd_raw.middleCols(lo, m) * alpha)
+                               : Eigen::VectorXd(out.qd_raw.middleCols(lo, m) * beta);
+      out.tau.col(k) = out.tau_raw.middleCols(lo, m) * alpha;
+      out.dtau.col(k) = out.tau_raw.middleCols(lo, m) * beta;
       // Interior samples, decimated: the fitting rows.
-      const bool interior = t0 - data.t[begin] >= 3 * s && data.t[end - 1] - t0 >= 3 * s;
+      const bool interior = t0 - out.t[begin] >= 3 * s && out.t[end - 1] - t0 >= 3 * s;
       if (interior) {
         if (t0 >= last_row_time + 0.75 * s) {
           last_row_time = t0;

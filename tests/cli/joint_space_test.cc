@@ -9,7 +9,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
-#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/solvers/dataset_io.h"
 #include "run_diffdyn.h"
 
 namespace diffdyn {
@@ -95,14 +95,15 @@ TEST(JointSpace, EvalTakesDiagnosesExtendedModelOnThePandaLog) {
       RunDiffdyn("diagnose --model panda --measured " + kPanda + " --quiet --out " + out).exit_code,
       0);
   // The first 3000 samples (3 s) keep the test short.
-  JointData log = ReadMeasured(kPanda);
+  Dataset log = ReadDataset(kPanda);
   const int keep = 3000;
-  log.t.conservativeResize(keep);
-  log.q.conservativeResize(Eigen::NoChange, keep);
-  log.qd.conservativeResize(Eigen::NoChange, keep);
-  log.tau.conservativeResize(Eigen::NoChange, keep);
+  Trajectory& run = log.trajectories.at(0);
+  run.t.conservativeResize(keep);
+  run.states.conservativeResize(Eigen::NoChange, keep);
+  run.actions.conservativeResize(Eigen::NoChange, keep - 1);
+  run.channels.at("tau").conservativeResize(Eigen::NoChange, keep);
   const std::string head = TempPath("js_panda_head.csv");
-  WriteJointCsv(head, log);
+  WriteDataset(head, log);
   const auto extended = SummaryJson(
       RunDiffdyn("eval --model " + out + "/extended_model.json --data " + head + " --json"));
   const auto nominal = SummaryJson(RunDiffdyn("eval --model panda --data " + head + " --json"));

@@ -12,7 +12,7 @@
 #include "diffdyn/models/parallel.h"
 #include "diffdyn/models/random.h"
 #include "diffdyn/physics/pushing/ode_engine.h"
-#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/load_model.h"
 #include "diffdyn/solvers/version.h"
 
@@ -37,8 +37,8 @@ int main() {
   // Matrices allocated by the library and freed here, and the other way round.
   const char* csv = "consumer_joint.csv";
   std::ofstream(csv) << "t,q1,qd1,tau1\n0,0.1,0,0\n0.01,0.1,0,0\n0.02,0.1,0,0\n";
-  const diffdyn::JointData data = diffdyn::ReadJointCsv(csv);
-  ok = ok && data.size() == 3 && data.q(0, 2) == 0.1;
+  const diffdyn::Dataset data = diffdyn::ReadDataset(csv);
+  ok = ok && data.samples() == 3 && data.trajectories[0].states(0, 2) == 0.1;
   const auto pendulum = diffdyn::LoadTransitionModel("pendulum", {.dt = 0.01});
   auto ws = pendulum->MakeWorkspace(2);
   Eigen::MatrixXd states(2, 2), torques = Eigen::MatrixXd::Zero(1, 2), next(2, 2);

@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 
 #include <gtest/gtest.h>
@@ -130,6 +131,72 @@ TEST(ReadDataset, RealPandaLogIsIrregular) {
   EXPECT_NEAR(dt.median, 1e-3, 1e-6);
   EXPECT_NEAR(dt.min, 0.0007, 1e-6);
   EXPECT_NEAR(dt.max, 0.00881, 1e-6);
+}
+
+// Columns are found by name; a missing one, a non-number and a time going back
+// are named with file and line; a missing file names the path.
+TEST(ReadDataset, JointCsvColumnsByNameAndErrors) {
+  const Dataset b = ReadDataset(WriteText("by_name.csv", "tau1,qd1,t,q1\n1,2,0,3\n1,2,0.1,3\n1,2,0.2,3\n"));
+  EXPECT_DOUBLE_EQ(b.trajectories[0].states(0, 1), 3.0);
+  EXPECT_DOUBLE_EQ(b.trajectories[0].states(1, 1), 2.0);
+  std::string e = ErrorOf(WriteText("no_tau.csv", "t,q1,qd1\n0,1,2\n"));
+  EXPECT_NE(e.find("no_tau.csv:1: no column 'tau1'"), std::string::npos) << e;
+  e = ErrorOf(WriteText("word.csv", "t,q1,qd1,tau1\n0,1,2,3\n0.1,x,2,3\n0.2,1,2,3\n"));
+  EXPECT_NE(e.find("word.csv:3"), std::string::npos) << e;
+  e = ErrorOf(WriteText("earlier.csv", "t,q1,qd1,tau1\n0,1,2,3\n0.1,1,2,3\n0.05,1,2,3\n"));
+  EXPECT_NE(e.find("earlier.csv:4"), std::string::npos) << e;
+  e = ErrorOf(::testing::TempDir() + "/no_such_dir_xyz/missing.csv");
+  EXPECT_NE(e.find("missing.csv: no such file"), std::string::npos) << e;
+}
+
+// Without qd columns qd is the central difference of q, and listed as unmeasured.
+TEST(ReadDataset, JointCsvWithoutVelocitiesDifferentiatesPositions) {
+  const Dataset d = ReadDataset(WriteText("no_qd.csv", "t,q1,tau1\n0,0,1\n0.1,0.2,1\n0.2,0.6,1\n0.3,1.2,1\n"));
+  EXPECT_FALSE(d.IsMeasured("qd1"));
+  EXPECT_TRUE(d.IsMeasured("q1"));
+  EXPECT_TRUE(d.IsMeasured("tau"));
+  EXPECT_NEAR(d.trajectories[0].states(1, 1), 3.0, 1e-12);  // (0.6 - 0) / 0.2
+  EXPECT_NEAR(d.trajectories[0].states(1, 0), 2.0, 1e-12);  // one-sided at the start
+}
+
+// One run made in memory: the layout applies, and bad sizes or times are refused.
+TEST(JointSpaceDataset, MakesOneTrajectoryOfTheRun) {
+  const Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(5, 0.0, 0.4);
+  const Eigen::MatrixXd q = Eigen::MatrixXd::Random(2, 5), qd = Eigen::MatrixXd::Random(2, 5);
+  Eigen::MatrixXd tau = Eigen::MatrixXd::Random(2, 5);
+  const Dataset d = JointSpaceDataset("run", t, q, qd, tau, {.actuated = {2}, .prismatic = {1}});
+  ASSERT_EQ(d.trajectories.size(), 1u);
+  EXPECT_EQ(d.samples(), 5);
+  EXPECT_EQ(JointCount(d), 2);
+  EXPECT_EQ(d.system.action_names, std::vector<std::string>{"tau2"});
+  EXPECT_EQ(d.trajectories[0].actions, tau.row(1).head(4));
+  EXPECT_EQ(d.trajectories[0].channels.at("tau"), tau);
+  EXPECT_EQ(d.trajectories[0].states.bottomRows(2), qd);
+  EXPECT_THROW(JointSpaceDataset("run", t, q, qd, tau.leftCols(4)), Error);
+  Eigen::VectorXd back = t;
+  back[3] = 0.1;
+  EXPECT_THROW(JointSpaceDataset("run", back, q, qd, tau), Error);
+  tau(0, 0) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(JointSpaceDataset("run", t, q, qd, tau), Error);
+}
+
+// The IBM double pendulum (free motion from camera markers) and the DeLaN characters.
+TEST(ReadDataset, RealDoublePendulumAndCharacters) {
+  const std::string shared = DIFFDYN_SHARED_DATA_DIR;
+  const Dataset ibm = ReadDataset(shared + "/ibm_double_pendulum");
+  EXPECT_EQ(ibm.format, "ibm-double-pendulum");
+  EXPECT_EQ(JointCount(ibm), 2);
+  EXPECT_FALSE(ibm.IsMeasured("qd1"));
+  EXPECT_FALSE(ibm.IsMeasured("tau"));
+  EXPECT_NEAR(ibm.properties.at("link1_px"), 602.1, 3.0);
+  EXPECT_NEAR(ibm.properties.at("link2_px"), 460.8, 3.0);
+  EXPECT_NEAR(ibm.Intervals().median, 1.0 / 400.0, 1e-12);
+  const Dataset delan = ReadDataset(shared + "/delan_characters");
+  EXPECT_EQ(delan.format, "delan-characters");
+  ASSERT_EQ(delan.trajectories.size(), 20u);
+  EXPECT_EQ(delan.trajectories.front().label, "b");
+  EXPECT_EQ(delan.samples(), 2913);
+  EXPECT_TRUE(delan.trajectories[0].channels.count("qdd"));
 }
 
 }  // namespace

@@ -3,9 +3,12 @@
 // agree with the training loss.
 #include "diffdyn/solvers/delan_training.h"
 
+#include <cmath>
 #include <set>
 
 #include <gtest/gtest.h>
+
+#include "diffdyn/solvers/dataset_io.h"
 
 namespace diffdyn {
 namespace {
@@ -13,29 +16,27 @@ namespace {
 const std::string kCharacters = std::string(DIFFDYN_SHARED_DATA_DIR) + "/delan_characters";
 
 TEST(DelanTraining, CharactersSplitHoldsOutEQV) {
-  const JointData data = ReadMeasured(kCharacters);
-  ASSERT_EQ(data.segment_labels.size(), 20u);
-  EXPECT_EQ(data.segment_labels.front(), "b");
+  const Dataset data = ReadDataset(kCharacters);
+  ASSERT_EQ(data.trajectories.size(), 20u);
+  EXPECT_EQ(data.trajectories.front().label, "b");
   const DelanSplit split = SplitForDelan(data, 0.5, 7);  // val_fraction does not apply
   EXPECT_EQ(split.train.size(), 2459);
   EXPECT_EQ(split.test.size(), 454);
   EXPECT_EQ(split.test.qdd.cols(), 454);
   EXPECT_EQ(split.test.channels.at("g").cols(), 454);
   // The test samples are exactly those of e, q, v, in file order.
-  std::vector<int> test_index;
-  for (size_t s = 0; s < data.segment_starts.size(); ++s) {
-    const int end = s + 1 < data.segment_starts.size() ? data.segment_starts[s + 1] : data.size();
-    const std::string& l = data.segment_labels[s];
-    if (l == "e" || l == "q" || l == "v")
-      for (int i = data.segment_starts[s]; i < end; ++i) test_index.push_back(i);
+  std::vector<Eigen::VectorXd> test_tau;
+  for (const Trajectory& t : data.trajectories) {
+    if (t.label != "e" && t.label != "q" && t.label != "v") continue;
+    for (Eigen::Index i = 0; i < t.states.cols(); ++i) test_tau.push_back(t.channels.at("tau").col(i));
   }
-  ASSERT_EQ(test_index.size(), 454u);
-  for (int i = 0; i < 454; ++i) EXPECT_EQ(split.test.tau.col(i), data.tau.col(test_index[i]));
+  ASSERT_EQ(test_tau.size(), 454u);
+  for (int i = 0; i < 454; ++i) EXPECT_EQ(split.test.tau.col(i), test_tau[i]);
 }
 
 TEST(DelanTraining, OtherDataGetsASeededSplit) {
-  JointData data = ReadMeasured(kCharacters);
-  data.format = "csv";
+  Dataset data = ReadDataset(kCharacters);
+  data.format = "joint-csv";
   const DelanSplit a = SplitForDelan(data, 0.25, 3), b = SplitForDelan(data, 0.25, 3),
                    c = SplitForDelan(data, 0.25, 4);
   EXPECT_EQ(a.test.size(), 728);  // round(0.25 * 2913)
@@ -44,8 +45,21 @@ TEST(DelanTraining, OtherDataGetsASeededSplit) {
   EXPECT_FALSE(a.test.q == c.test.q);
 }
 
+// Without a qdd channel the samples are smoothed and qdd estimated: on a
+// trajectory q = sin(t) the estimate is close to -sin(t) inside.
+TEST(DelanTraining, SamplesEstimateAccelerationsWhereNoneWereMeasured) {
+  const Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(2001, 0.0, 4.0);
+  const Eigen::MatrixXd q = t.array().sin().matrix().transpose();
+  const Eigen::MatrixXd qd = t.array().cos().matrix().transpose();
+  const Dataset data = JointSpaceDataset("sine", t, q, qd, Eigen::MatrixXd::Ones(1, t.size()));
+  const DelanSamples s = SamplesOf(data);
+  ASSERT_EQ(s.size(), 2001);
+  for (int k = 500; k <= 1500; k += 250) EXPECT_NEAR(s.qdd(0, k), -std::sin(t[k]), 2e-3) << k;
+  EXPECT_TRUE(s.measured_torque);
+}
+
 TEST(DelanTraining, LearnsAndIsTheSameAtAnyThreadCount) {
-  const DelanSplit split = SplitForDelan(ReadMeasured(kCharacters), 0.2, 0);
+  const DelanSplit split = SplitForDelan(ReadDataset(kCharacters), 0.2, 0);
   TrainOptions options = DelanTrainDefaults();
   options.epochs = 60;
   options.progress = false;
@@ -69,7 +83,7 @@ TEST(DelanTraining, LearnsAndIsTheSameAtAnyThreadCount) {
 }
 
 TEST(DelanTraining, RefusesDataOfAnotherSize) {
-  const DelanSplit split = SplitForDelan(ReadMeasured(kCharacters), 0.2, 0);
+  const DelanSplit split = SplitForDelan(ReadDataset(kCharacters), 0.2, 0);
   Delan model = Delan::Initialized({.dof = 3}, 0);
   EXPECT_THROW(TrainDelan(&model, split.train, split.test, DelanTrainDefaults()), Error);
   EXPECT_THROW(ScoreDelan(model, split.test), Error);
@@ -78,10 +92,9 @@ TEST(DelanTraining, RefusesDataOfAnotherSize) {
 // w_j = 1 / Var(tau_j); an unactuated joint (tau = 0) gets the largest other weight;
 // data without varying torque are refused.
 TEST(DelanTraining, BalancedJointWeights) {
-  JointData d;
+  DelanSamples d;
   d.path = "weights.csv";
-  d.t = Eigen::VectorXd::LinSpaced(4, 0.0, 0.3);
-  d.q = d.qd = Eigen::MatrixXd::Zero(3, 4);
+  d.q = d.qd = d.qdd = Eigen::MatrixXd::Zero(3, 4);
   d.tau = Eigen::MatrixXd::Zero(3, 4);
   d.tau.row(0) << 1, -1, 1, -1;      // variance 1
   d.tau.row(1) << 10, -10, 10, -10;  // variance 100

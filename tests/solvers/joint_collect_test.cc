@@ -18,8 +18,8 @@ Eigen::Vector2d PendulumRate(const Eigen::Vector2d& x, double tau) {
   return {x[1], (tau - kM * kG * kL * std::sin(x[0])) / (kM * kL * kL)};
 }
 
-TEST(CollectJointData, PendulumMatchesAnIndependentClosedFormIntegration) {
-  const Dataset d = CollectJointData(JointTaskByName("pendulum"),
+TEST(CollectJointSpace, PendulumMatchesAnIndependentClosedFormIntegration) {
+  const Dataset d = CollectJointSpace(JointTaskByName("pendulum"),
                                      {.trajectories = 3, .seconds = 1.0, .dt = 0.04, .seed = 7});
   ASSERT_EQ(d.trajectories.size(), 3u);
   EXPECT_EQ(d.system.action_names, std::vector<std::string>{"tau1"});
@@ -50,8 +50,8 @@ TEST(CollectJointData, PendulumMatchesAnIndependentClosedFormIntegration) {
 
 // tau = m + c + g + f on every joint of every sample (the cart-pole task has
 // viscous friction on both joints; the pole is not actuated: its torque is 0).
-TEST(CollectJointData, ComponentsAddUpToTheTorque) {
-  const Dataset d = CollectJointData(JointTaskByName("cartpole"),
+TEST(CollectJointSpace, ComponentsAddUpToTheTorque) {
+  const Dataset d = CollectJointSpace(JointTaskByName("cartpole"),
                                      {.trajectories = 2, .seconds = 0.5, .dt = 0.04, .seed = 3});
   EXPECT_EQ(d.system.action_names, std::vector<std::string>{"tau1"});
   for (const Trajectory& t : d.trajectories) {
@@ -63,18 +63,18 @@ TEST(CollectJointData, ComponentsAddUpToTheTorque) {
   }
 }
 
-TEST(CollectJointData, SameDataAtAnyThreadCountAndSeedMatters) {
+TEST(CollectJointSpace, SameDataAtAnyThreadCountAndSeedMatters) {
   const JointTask task = JointTaskByName("double-pendulum");
-  const Dataset one = CollectJointData(task, {.trajectories = 4, .seconds = 0.4, .seed = 2, .threads = 1});
-  const Dataset two = CollectJointData(task, {.trajectories = 4, .seconds = 0.4, .seed = 2, .threads = 2});
-  const Dataset other = CollectJointData(task, {.trajectories = 4, .seconds = 0.4, .seed = 3, .threads = 2});
+  const Dataset one = CollectJointSpace(task, {.trajectories = 4, .seconds = 0.4, .seed = 2, .threads = 1});
+  const Dataset two = CollectJointSpace(task, {.trajectories = 4, .seconds = 0.4, .seed = 2, .threads = 2});
+  const Dataset other = CollectJointSpace(task, {.trajectories = 4, .seconds = 0.4, .seed = 3, .threads = 2});
   for (int i = 0; i < 4; ++i) {
     EXPECT_EQ(one.trajectories[i].states, two.trajectories[i].states);
     EXPECT_EQ(one.trajectories[i].channels, two.trajectories[i].channels);
     EXPECT_NE(one.trajectories[i].states, other.trajectories[i].states);
   }
-  EXPECT_THROW(CollectJointData(task, {.dt = -1.0}), Error);
-  EXPECT_THROW(CollectJointData(task, {.seconds = 0.01, .dt = 0.04}), Error);
+  EXPECT_THROW(CollectJointSpace(task, {.dt = -1.0}), Error);
+  EXPECT_THROW(CollectJointSpace(task, {.seconds = 0.01, .dt = 0.04}), Error);
 }
 
 TEST(JointTask, SystemsEffectsAndActuation) {

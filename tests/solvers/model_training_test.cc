@@ -11,7 +11,7 @@ namespace diffdyn {
 namespace {
 
 Dataset SmallPendulumData(std::uint64_t seed) {
-  return CollectJointData(JointTaskByName("pendulum"), {.trajectories = 6, .seconds = 2.0, .seed = seed});
+  return CollectJointSpace(JointTaskByName("pendulum"), {.trajectories = 6, .seconds = 2.0, .seed = seed});
 }
 
 TEST(FitLearnedModel, ScalesTrainsAndTakesTheDataTimeStep) {

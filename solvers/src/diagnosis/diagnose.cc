@@ -140,9 +140,9 @@ ExtendedModel RefitSelected(const PreparedData& prep, const ExtendedModel& exten
 
 // Named effects: the torque-regressor selection, its refit, and for free
 // motion the energy balance.
-ExtendedModel NameEffects(const PreparedData& prep, const JointData& data, const DiagnosisOptions& options,
+ExtendedModel NameEffects(const PreparedData& prep, const Dataset& data, const DiagnosisOptions& options,
                           DiagnosisResult* result, Eigen::VectorXd* inv_sigma) {
-  const CandidateLibrary lib = BuildCandidates(prep, options.kinds, data.has_tau);
+  const CandidateLibrary lib = BuildCandidates(prep, options.kinds, data.IsMeasured("tau"));
   result->not_identifiable = lib.not_identifiable;
   result->static_data = lib.static_data;
   if (lib.static_data) {
@@ -161,7 +161,7 @@ ExtendedModel NameEffects(const PreparedData& prep, const JointData& data, const
     extended = DropInsignificant(prep, RefitSelected(prep, extended, *inv_sigma, result), *inv_sigma, options.alpha,
                                  result);
   }
-  if (!data.has_tau && Wanted(options, EffectKind::kViscous)) {
+  if (!data.IsMeasured("tau") && Wanted(options, EffectKind::kViscous)) {
     std::vector<int> joints;
     for (int j = 0; j < prep.n; ++j) {
       const bool has = std::any_of(extended.effects().begin(), extended.effects().end(), [&](const Effect& e) {
@@ -290,14 +290,14 @@ std::string EffectUnit(const AnalyticModel& model, const Effect& effect, int par
 }
 
 DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen::VectorXd& params,
-                         const JointData& data, const DiagnosisOptions& options) {
+                         const Dataset& data, const DiagnosisOptions& options) {
   DIFFDYN_CHECK(model != nullptr, "diagnose: no model");
   DIFFDYN_CHECK(params.size() == static_cast<int>(model->param_specs().size()), "diagnose: model ",
                 model->name(), " needs ", model->param_specs().size(), " parameters, got ", params.size());
   return Diagnose(ExtendedModel(model, params, {}), data, options);
 }
 
-DiagnosisResult Diagnose(const ExtendedModel& nominal, const JointData& data, const DiagnosisOptions& options) {
+DiagnosisResult Diagnose(const ExtendedModel& nominal, const Dataset& data, const DiagnosisOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   DIFFDYN_CHECK(options.alpha > 0 && options.alpha < 1, "diagnose: alpha ", options.alpha, " must be in (0, 1)");
   PrepareOptions prepare;
@@ -312,7 +312,7 @@ DiagnosisResult Diagnose(const ExtendedModel& nominal, const JointData& data, co
   DiagnosisResult result;
   result.model_name = model->name();
   result.cutoff_hz = prep.sd.cutoff_hz;
-  result.n_samples = data.size();
+  result.n_samples = data.samples();
   result.notes = prep.notes;
   result.nominal_params = prep.params;
   result.train_rows = static_cast<int>(prep.train.size());

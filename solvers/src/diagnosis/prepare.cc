@@ -7,6 +7,7 @@
 #include <ceres/ceres.h>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/diagnosis/refit.h"
 
 namespace diffdyn {
@@ -19,15 +20,9 @@ double Median(std::vector<double> v) {
   return *mid;
 }
 
-// Median spacing of consecutive samples within segments (s).
-double MedianSpacing(const JointData& data) {
-  std::vector<double> dt;
-  for (std::size_t s = 0; s < data.segment_starts.size(); ++s) {
-    const int begin = data.segment_starts[s];
-    const int end = s + 1 < data.segment_starts.size() ? data.segment_starts[s + 1] : data.size();
-    for (int k = begin + 1; k < end; ++k) dt.push_back(data.t[k] - data.t[k - 1]);
-  }
-  return Median(std::move(dt));
+// Median spacing of consecutive samples within trajectories (s); 0 without any.
+double MedianSpacing(const Dataset& data) {
+  return data.transitions() > 0 ? data.Intervals().median : 0.0;
 }
 
 // Residuals tau - ID(p(x)) on the first `count` rows, divided by the diagonal of
@@ -144,7 +139,7 @@ void EvaluateNominal(PreparedData* prep) {
 }
 
 // The time split and the independent-sample count of the train rows.
-void SplitRows(const JointData& data, double holdout_fraction, PreparedData* prep) {
+void SplitRows(const Dataset& data, double holdout_fraction, PreparedData* prep) {
   const int rows = prep->rows;
   const int train_count = static_cast<int>(std::lround((1.0 - holdout_fraction) * rows));
   DIFFDYN_CHECK(train_count >= 10 && rows - train_count >= 5, "--measured ", data.path,
@@ -183,46 +178,50 @@ Eigen::VectorXd EstimateWhiteNoise(const Eigen::VectorXd& t, const Eigen::Matrix
   return out;
 }
 
-bool IsBackwardDifference(const JointData& data) {
+bool IsBackwardDifference(const Dataset& data) {
+  const int n = JointCount(data);
   double diff = 0, norm = 0;
-  for (std::size_t s = 0; s < data.segment_starts.size(); ++s) {
-    const int begin = data.segment_starts[s];
-    const int end = s + 1 < data.segment_starts.size() ? data.segment_starts[s + 1] : data.size();
-    for (int k = begin + 1; k < end; ++k) {
-      const double dt = data.t[k] - data.t[k - 1];
+  for (const Trajectory& traj : data.trajectories) {
+    const Eigen::VectorXd& t = traj.t;
+    const auto q = traj.states.topRows(n), qd = traj.states.bottomRows(n);
+    for (Eigen::Index k = 1; k < t.size(); ++k) {
+      const double dt = t[k] - t[k - 1];
       if (!(dt > 0)) return false;
-      diff += ((data.q.col(k) - data.q.col(k - 1)) / dt - data.qd.col(k)).squaredNorm();
-      norm += data.qd.col(k).squaredNorm();
+      diff += ((q.col(k) - q.col(k - 1)) / dt - qd.col(k)).squaredNorm();
+      norm += qd.col(k).squaredNorm();
     }
   }
   return norm > 0 && diff <= 1e-5 * norm;
 }
 
-JointData RecentreVelocity(const JointData& data) {
-  JointData out = data;
-  for (std::size_t s = 0; s < data.segment_starts.size(); ++s) {
-    const int begin = data.segment_starts[s];
-    const int end = s + 1 < data.segment_starts.size() ? data.segment_starts[s + 1] : data.size();
+Dataset RecentreVelocity(const Dataset& data) {
+  const int n = JointCount(data);
+  Dataset out = data;
+  for (std::size_t i = 0; i < data.trajectories.size(); ++i) {
+    const Eigen::VectorXd& t = data.trajectories[i].t;
+    const auto qd = data.trajectories[i].states.bottomRows(n);
+    auto out_qd = out.trajectories[i].states.bottomRows(n);
     // qd_k belongs to m_k = (t_{k-1} + t_k) / 2; interpolate between m_k and m_{k+1}.
-    for (int k = begin + 1; k + 1 < end; ++k) {
-      const double m0 = 0.5 * (data.t[k - 1] + data.t[k]), m1 = 0.5 * (data.t[k] + data.t[k + 1]);
-      const double w = (data.t[k] - m0) / (m1 - m0);
-      out.qd.col(k) = data.qd.col(k) + w * (data.qd.col(k + 1) - data.qd.col(k));
+    for (Eigen::Index k = 1; k + 1 < t.size(); ++k) {
+      const double m0 = 0.5 * (t[k - 1] + t[k]), m1 = 0.5 * (t[k] + t[k + 1]);
+      const double w = (t[k] - m0) / (m1 - m0);
+      out_qd.col(k) = qd.col(k) + w * (qd.col(k + 1) - qd.col(k));
     }
-    if (end - begin >= 2) out.qd.col(begin) = out.qd.col(begin + 1);
+    if (t.size() >= 2) out_qd.col(0) = out_qd.col(1);
   }
   return out;
 }
 
-double DefaultCutoffHz(const JointData& data) {
+double DefaultCutoffHz(const Dataset& data) {
   const double median = MedianSpacing(data);
   return median > 0 ? std::min(kMaxCutoffHz, 0.25 / median) : kMaxCutoffHz;
 }
 
-PreparedData PrepareData(const ExtendedModel& nominal, const JointData& data, const PrepareOptions& options) {
+PreparedData PrepareData(const ExtendedModel& nominal, const Dataset& data, const PrepareOptions& options) {
   const std::shared_ptr<const AnalyticModel> model = nominal.model_ptr();
   const Eigen::VectorXd& params = nominal.params();
-  DIFFDYN_CHECK(data.dof() == model->dof(), "--measured ", data.path, " has ", data.dof(),
+  const int dof = JointCount(data);
+  DIFFDYN_CHECK(dof == model->dof(), "--measured ", data.path, " has ", dof,
                 " joints, --model ", model->name(), " has ", model->dof());
   DIFFDYN_CHECK(params.size() == static_cast<int>(model->param_specs().size()),
                 "diagnose: model ", model->name(), " needs ", model->param_specs().size(),
@@ -236,13 +235,14 @@ PreparedData PrepareData(const ExtendedModel& nominal, const JointData& data, co
   prep.params = params;
   prep.n = model->dof();
   const double cutoff = options.cutoff_hz > 0 ? options.cutoff_hz : DefaultCutoffHz(data);
-  prep.velocity_recentred = data.has_qd && IsBackwardDifference(data);
-  prep.sd = SmoothJointData(prep.velocity_recentred ? RecentreVelocity(data) : data, cutoff);
+  prep.velocity_recentred = data.IsMeasured("qd1") && IsBackwardDifference(data);
+  prep.sd = SmoothJointSpace(prep.velocity_recentred ? RecentreVelocity(data) : data, cutoff);
   prep.rows = static_cast<int>(prep.sd.rows.size());
   prep.tau.resize(prep.n, prep.rows);
   for (int r = 0; r < prep.rows; ++r) prep.tau.col(r) = prep.sd.tau.col(prep.Sample(r));
-  prep.noise_std = EstimateWhiteNoise(data.t, data.tau, data.segment_starts);
-  prep.qd_noise_std = EstimateWhiteNoise(data.t, prep.sd.qd_raw, data.segment_starts);
+  const std::vector<int> starts(prep.sd.segment_bounds.begin(), prep.sd.segment_bounds.end() - 1);
+  prep.noise_std = EstimateWhiteNoise(prep.sd.t, prep.sd.tau_raw, starts);
+  prep.qd_noise_std = EstimateWhiteNoise(prep.sd.t, prep.sd.qd_raw, starts);
   prep.median_dt = MedianSpacing(data);
   if (prep.velocity_recentred) {
     prep.notes.push_back("qd is the backward difference of q (half a sample late): re-centred on the sample times");

@@ -7,18 +7,21 @@
 #include <gtest/gtest.h>
 
 #include "diffdyn/physics/model_registry.h"
+#include "diffdyn/solvers/dataset_io.h"
 
 namespace diffdyn {
 namespace {
 
 // A pendulum record at `rate` Hz: holds at fixed angles (static) or a swing.
-JointData Pendulum(bool static_holds, double rate, std::uint64_t seed) {
+Dataset Pendulum(bool static_holds, double rate, std::uint64_t seed) {
   const auto model = MakeAnalyticModel("pendulum");
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> normal(0.0, 1.0);
   const int count = static_cast<int>(40.0 * rate);
-  JointData d;
-  d.path = "pendulum.csv";
+  struct {
+    Eigen::VectorXd t;
+    Eigen::MatrixXd q, qd, tau;
+  } d;
   d.t.resize(count);
   d.q.resize(1, count);
   d.qd.resize(1, count);
@@ -34,7 +37,7 @@ JointData Pendulum(bool static_holds, double rate, std::uint64_t seed) {
     d.qd(0, k) = qd + 1e-3 * normal(rng);
     d.tau(0, k) = tau[0] + 0.01 * normal(rng);
   }
-  return d;
+  return JointSpaceDataset("pendulum.csv", d.t, d.q, d.qd, d.tau);
 }
 
 bool Has(const CandidateLibrary& lib, EffectKind kind) {

@@ -12,7 +12,7 @@
 #include "diffdyn/physics/model_registry.h"
 #include "diffdyn/solvers/extended_model_file.h"
 #include "diffdyn/solvers/hidden_effects.h"
-#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/solvers/dataset_io.h"
 #include "diffdyn/solvers/smoothing.h"
 
 namespace diffdyn {
@@ -31,86 +31,37 @@ void WriteFileText(const fs::path& path, const std::string& text) {
   out << text;
 }
 
-TEST(JointData, CsvRoundTripAndErrorsNameTheLine) {
-  const fs::path dir = TempDir("joint_csv");
-  JointData data;
-  data.t = Eigen::VectorXd::LinSpaced(20, 0.0, 0.19);
-  data.q.resize(2, 20);
-  data.qd.resize(2, 20);
-  data.tau.resize(2, 20);
-  for (int k = 0; k < 20; ++k) {
-    for (int j = 0; j < 2; ++j) {
-      data.q(j, k) = std::sin(0.3 * k + j);
-      data.qd(j, k) = std::cos(0.7 * k - j) / 3.0;
-      data.tau(j, k) = 1.0 / (1.0 + k + j);
-    }
-  }
-  WriteJointCsv((dir / "a.csv").string(), data);
-  const JointData back = ReadJointCsv((dir / "a.csv").string());
-  EXPECT_EQ(back.dof(), 2);
-  EXPECT_EQ(back.size(), 20);
-  EXPECT_LT((back.tau - data.tau).cwiseAbs().maxCoeff(), 1e-15);
-  // Columns in any order are found by name.
-  WriteFileText(dir / "b.csv", "tau1,qd1,t,q1\n1,2,0,3\n1,2,0.1,3\n1,2,0.2,3\n");
-  EXPECT_DOUBLE_EQ(ReadJointCsv((dir / "b.csv").string()).q(0, 1), 3.0);
-  WriteFileText(dir / "c.csv", "t,q1,qd1\n0,1,2\n");
-  try {
-    ReadJointCsv((dir / "c.csv").string());
-    FAIL();
-  } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("c.csv:1: no column 'tau1'"), std::string::npos) << e.what();
-  }
-  WriteFileText(dir / "d.csv", "t,q1,qd1,tau1\n0,1,2,3\n0.1,x,2,3\n0.2,1,2,3\n");
-  try {
-    ReadJointCsv((dir / "d.csv").string());
-    FAIL();
-  } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("d.csv:3"), std::string::npos) << e.what();
-  }
-  WriteFileText(dir / "e.csv", "t,q1,qd1,tau1\n0,1,2,3\n0.1,1,2,3\n0.05,1,2,3\n");
-  EXPECT_THROW(ReadJointCsv((dir / "e.csv").string()), Error);
-  EXPECT_THROW(ReadMeasured((dir / "missing.csv").string()), Error);
-}
-
-TEST(JointData, ReadsTheRealDatasets) {
-  const std::string shared = DIFFDYN_SHARED_DATA_DIR;
-  const JointData panda = ReadMeasured(shared + "/panda_gaz2019_traj1");
-  EXPECT_EQ(panda.format, "panda-gaz2019");
-  EXPECT_EQ(panda.dof(), 7);
-  EXPECT_EQ(panda.size(), 20544);
-  const JointData ibm = ReadMeasured(shared + "/ibm_double_pendulum");
-  EXPECT_EQ(ibm.dof(), 2);
-  EXPECT_FALSE(ibm.has_qd);
-  ASSERT_EQ(ibm.link_lengths_px.size(), 2u);
-  EXPECT_NEAR(ibm.link_lengths_px[0], 602.1, 3.0);
-  EXPECT_NEAR(ibm.link_lengths_px[1], 460.8, 3.0);
-  const JointData delan = ReadMeasured(shared + "/delan_characters");
-  EXPECT_EQ(delan.segment_starts.size(), 20u);
-}
-
 // A sinusoid: smoothing keeps phase, and qdd = d/dt of smoothed qd is accurate.
 TEST(Smoothing, ZeroPhaseDerivativeOfASinusoid) {
-  JointData data;
   const int count = 2001;
   const double w = 2 * std::numbers::pi * 0.7;
-  data.t = Eigen::VectorXd::LinSpaced(count, 0.0, 2.0);
-  data.q.resize(1, count);
-  data.qd.resize(1, count);
-  data.tau.resize(1, count);
-  for (int k = 0; k < count; ++k) {
-    data.q(0, k) = std::sin(w * data.t[k]);
-    data.qd(0, k) = w * std::cos(w * data.t[k]);
-    data.tau(0, k) = data.q(0, k);
-  }
-  const SmoothedData sd = SmoothJointData(data, 10.0);
+  const Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(count, 0.0, 2.0);
+  const Eigen::MatrixXd q = (w * t).array().sin().matrix().transpose();
+  const Eigen::MatrixXd qd = w * (w * t).array().cos().matrix().transpose();
+  const Dataset data = JointSpaceDataset("sine.csv", t, q, qd, q);
+  const SmoothedData sd = SmoothJointSpace(data, 10.0);
   EXPECT_NEAR(sd.sigma_t, std::sqrt(std::log(2.0)) / (2 * std::numbers::pi * 10.0), 1e-15);
   for (int k : sd.rows) {
     // Gaussian attenuation exp(-(w s)^2 / 2) and no phase shift.
     const double gain = std::exp(-0.5 * std::pow(w * sd.sigma_t, 2));
-    EXPECT_NEAR(sd.qdd(0, k), -gain * w * w * std::sin(w * data.t[k]), 2e-3 * w * w);
-    EXPECT_NEAR(sd.tau(0, k), gain * std::sin(w * data.t[k]), 1e-3);
+    EXPECT_NEAR(sd.qdd(0, k), -gain * w * w * std::sin(w * t[k]), 2e-3 * w * w);
+    EXPECT_NEAR(sd.tau(0, k), gain * std::sin(w * t[k]), 1e-3);
   }
-  EXPECT_THROW(SmoothJointData(data, -1.0), Error);
+  EXPECT_THROW(SmoothJointSpace(data, -1.0), Error);
+}
+
+// Two trajectories smoothed side by side: no kernel reaches across their boundary.
+TEST(Smoothing, NeverCrossesATrajectoryBoundary) {
+  const Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(400, 0.0, 3.99);
+  const Eigen::MatrixXd ones = Eigen::MatrixXd::Ones(1, 400);
+  Dataset data = JointSpaceDataset("steps.csv", t, ones, 0 * ones, ones);
+  Dataset other = JointSpaceDataset("steps.csv", t, -ones, 0 * ones, -ones);
+  data.trajectories.push_back(other.trajectories[0]);
+  const SmoothedData sd = SmoothJointSpace(data, 10.0);
+  ASSERT_EQ(sd.segment_bounds, (std::vector<int>{0, 400, 800}));
+  for (int k : {0, 399}) EXPECT_NEAR(sd.q(0, k), 1.0, 1e-12) << k;
+  for (int k : {400, 799}) EXPECT_NEAR(sd.tau(0, k), -1.0, 1e-12) << k;
+  EXPECT_NEAR(sd.qdd.cwiseAbs().maxCoeff(), 0.0, 1e-9);
 }
 
 TEST(ExtendedModelFile, RoundTripAndValidation) {
@@ -198,11 +149,11 @@ TEST(Diagnosis, NamesNothingWithoutAnEffect) {
 // distances, mass ratio and scale fitted on the first quarter; dissipation is
 // named and both the energy-balance error and the 0.1 s rollout error drop.
 TEST(Diagnosis, NamesDissipationOnTheRealDoublePendulum) {
-  const JointData data = ReadMeasured(std::string(DIFFDYN_SHARED_DATA_DIR) + "/ibm_double_pendulum");
+  const Dataset data = ReadDataset(std::string(DIFFDYN_SHARED_DATA_DIR) + "/ibm_double_pendulum");
   const auto m = MakeAnalyticModel("double-pendulum");
   Eigen::VectorXd p = m->DefaultParams();
   p[m->ParamIndex("l1")] = 1.0;
-  p[m->ParamIndex("l2")] = data.link_lengths_px[1] / data.link_lengths_px[0];
+  p[m->ParamIndex("l2")] = data.properties.at("link2_px") / data.properties.at("link1_px");
   DiagnosisOptions options;
   options.fit_params = {"m2"};
   options.scale_params = {"l1", "l2"};
@@ -227,28 +178,25 @@ TEST(Diagnosis, StaticHoldsNameThePayloadAndNothingThatNeedsMotion) {
   const auto panda = MakeAnalyticModel("panda");
   const ExtendedModel loaded(panda, panda->DefaultParams(), {{EffectKind::kPayload, 0, {1.5}, {}}});
   Rng rng(11);
-  JointData d;
-  d.path = "holds.csv";
   const int poses = 8, per_pose = 60;  // 3 s each at 20 Hz
-  d.t.resize(poses * per_pose);
-  d.q.resize(7, poses * per_pose);
-  d.qd.resize(7, poses * per_pose);
-  d.tau.resize(7, poses * per_pose);
-  d.segment_starts.clear();
+  Dataset d;
   for (int p = 0; p < poses; ++p) {
-    d.segment_starts.push_back(p * per_pose);
     Eigen::VectorXd q(7);
     for (int j = 0; j < 7; ++j) q[j] = 0.8 * (2.0 * UniformUnit(rng) - 1.0);
     const Eigen::VectorXd tau = loaded.JointTorque(q, Eigen::VectorXd::Zero(7), Eigen::VectorXd::Zero(7));
+    Eigen::VectorXd t(per_pose);
+    Eigen::MatrixXd qs(7, per_pose), qds(7, per_pose), taus(7, per_pose);
     for (int k = 0; k < per_pose; ++k) {
-      const int i = p * per_pose + k;
-      d.t[i] = k / 20.0;
+      t[k] = k / 20.0;
       for (int j = 0; j < 7; ++j) {
-        d.q(j, i) = q[j] + 1e-5 * StandardNormal(rng);
-        d.qd(j, i) = 1e-3 * StandardNormal(rng);
-        d.tau(j, i) = tau[j] + 0.1 * StandardNormal(rng);
+        qs(j, k) = q[j] + 1e-5 * StandardNormal(rng);
+        qds(j, k) = 1e-3 * StandardNormal(rng);
+        taus(j, k) = tau[j] + 0.1 * StandardNormal(rng);
       }
     }
+    const Dataset pose = JointSpaceDataset("holds.csv", t, qs, qds, taus, {.all_actuated = true});
+    if (p == 0) d = pose;
+    else d.trajectories.push_back(pose.trajectories[0]);
   }
   const DiagnosisResult r = Diagnose(panda, panda->DefaultParams(), d, DiagnosisOptions{});
   EXPECT_TRUE(r.static_data);

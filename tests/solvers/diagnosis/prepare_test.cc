@@ -8,18 +8,26 @@
 #include <gtest/gtest.h>
 
 #include "diffdyn/physics/model_registry.h"
+#include "diffdyn/solvers/dataset_io.h"
 
 namespace diffdyn {
 namespace {
 
+// One joint's samples: times, q, qd and tau (1 x N).
+struct Signals {
+  Eigen::VectorXd t;
+  Eigen::MatrixXd q, qd, tau;
+
+  Dataset AsDataset() const { return JointSpaceDataset("record.csv", t, q, qd, tau); }
+};
+
 // One joint: `signal(t)` plus white noise sigma, samples at spacing dt (+- jitter).
-JointData Record(double seconds, double dt, double jitter, double sigma, std::uint64_t seed,
-                 double (*signal)(double)) {
+Signals Record(double seconds, double dt, double jitter, double sigma, std::uint64_t seed,
+               double (*signal)(double)) {
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> normal(0.0, 1.0);
   std::uniform_real_distribution<double> uniform(-jitter, jitter);
-  JointData d;
-  d.path = "record.csv";
+  Signals d;
   const int count = static_cast<int>(seconds / dt);
   d.t.resize(count);
   d.q.resize(1, count);
@@ -45,43 +53,44 @@ TEST(EstimateWhiteNoise, RecoversTheSigmaOfMovingAndHeldSignals) {
   };
   for (const Case& c : {Case{1e-3, 0.0, Motion}, Case{1e-3, 0.3, Motion}, Case{0.05, 0.0, Holds},
                         Case{0.05, 0.2, Holds}}) {
-    const JointData d = Record(60.0, c.dt, c.jitter, 0.1, 3, c.signal);
-    const Eigen::VectorXd sigma = EstimateWhiteNoise(d.t, d.tau, d.segment_starts);
+    const Signals d = Record(60.0, c.dt, c.jitter, 0.1, 3, c.signal);
+    const Eigen::VectorXd sigma = EstimateWhiteNoise(d.t, d.tau, {0});
     EXPECT_NEAR(sigma[0], 0.1, 0.01) << "dt " << c.dt << " jitter " << c.jitter;
   }
 }
 
 TEST(EstimateWhiteNoise, IsZeroForALinearSignal) {
-  const JointData d = Record(10.0, 1e-2, 0.0, 0.0, 1, [](double t) { return 2.0 * t - 1.0; });
-  EXPECT_LT(EstimateWhiteNoise(d.t, d.tau, d.segment_starts)[0], 1e-9);
+  const Signals d = Record(10.0, 1e-2, 0.0, 0.0, 1, [](double t) { return 2.0 * t - 1.0; });
+  EXPECT_LT(EstimateWhiteNoise(d.t, d.tau, {0})[0], 1e-9);
 }
 
 // A qd that is the backward difference of q is found and moved half a sample
 // earlier: its error against the true velocity drops from O(T) to O(T^2).
 TEST(RecentreVelocity, MovesABackwardDifferenceToTheSampleTimes) {
-  JointData d = Record(10.0, 1e-2, 0.0, 0.0, 1, Motion);
-  EXPECT_FALSE(IsBackwardDifference(d));
-  for (int k = 1; k < d.size(); ++k) d.qd(0, k) = (d.q(0, k) - d.q(0, k - 1)) / (d.t[k] - d.t[k - 1]);
+  Signals d = Record(10.0, 1e-2, 0.0, 0.0, 1, Motion);
+  EXPECT_FALSE(IsBackwardDifference(d.AsDataset()));
+  const int count = static_cast<int>(d.t.size());
+  for (int k = 1; k < count; ++k) d.qd(0, k) = (d.q(0, k) - d.q(0, k - 1)) / (d.t[k] - d.t[k - 1]);
   d.qd(0, 0) = d.qd(0, 1);
-  ASSERT_TRUE(IsBackwardDifference(d));
-  const JointData r = RecentreVelocity(d);
+  ASSERT_TRUE(IsBackwardDifference(d.AsDataset()));
+  const Dataset r = RecentreVelocity(d.AsDataset());
   double before = 0, after = 0;
-  for (int k = 1; k + 1 < d.size(); ++k) {
+  for (int k = 1; k + 1 < count; ++k) {
     before = std::max(before, std::abs(d.qd(0, k) - std::cos(d.t[k])));
-    after = std::max(after, std::abs(r.qd(0, k) - std::cos(d.t[k])));
+    after = std::max(after, std::abs(r.trajectories[0].states(1, k) - std::cos(d.t[k])));
   }
   EXPECT_GT(before, 4e-3);  // about T/2 |q''|
   EXPECT_LT(after, 5e-5);
 }
 
 TEST(DefaultCutoffHz, IsTenHertzOrAQuarterOfTheSampleRate) {
-  EXPECT_DOUBLE_EQ(DefaultCutoffHz(Record(5.0, 1e-3, 0.0, 0.0, 1, Motion)), kMaxCutoffHz);
-  EXPECT_NEAR(DefaultCutoffHz(Record(30.0, 0.05, 0.0, 0.0, 1, Motion)), 5.0, 1e-9);
+  EXPECT_DOUBLE_EQ(DefaultCutoffHz(Record(5.0, 1e-3, 0.0, 0.0, 1, Motion).AsDataset()), kMaxCutoffHz);
+  EXPECT_NEAR(DefaultCutoffHz(Record(30.0, 0.05, 0.0, 0.0, 1, Motion).AsDataset()), 5.0, 1e-9);
 }
 
 TEST(PrepareData, SplitsInTimeAndRefusesAShortRecord) {
   const auto model = MakeAnalyticModel("pendulum");
-  const JointData d = Record(20.0, 1e-2, 0.0, 0.01, 2, Motion);
+  const Dataset d = Record(20.0, 1e-2, 0.0, 0.01, 2, Motion).AsDataset();
   const PreparedData prep = PrepareData(ExtendedModel(model, model->DefaultParams(), {}), d, PrepareOptions{});
   ASSERT_FALSE(prep.train.empty());
   EXPECT_LT(prep.train.back(), prep.heldout.front());
@@ -89,7 +98,7 @@ TEST(PrepareData, SplitsInTimeAndRefusesAShortRecord) {
   EXPECT_GT(prep.n_eff, 10.0);
   EXPECT_TRUE(prep.residual.allFinite());
   EXPECT_NEAR(prep.noise_std[0], 0.01, 0.002);
-  EXPECT_THROW(PrepareData(ExtendedModel(model, model->DefaultParams(), {}), Record(0.15, 1e-2, 0.0, 0.01, 2, Motion),
+  EXPECT_THROW(PrepareData(ExtendedModel(model, model->DefaultParams(), {}), Record(0.15, 1e-2, 0.0, 0.01, 2, Motion).AsDataset(),
                            PrepareOptions{}),
                Error);
 }

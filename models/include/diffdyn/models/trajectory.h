@@ -89,6 +89,27 @@ struct Dataset {
   /// Where it came from and its schema ("pushing-csv", "joint-csv", "panda-gaz2019", ...).
   std::string path;
   std::string format;
+  /// What the reader did, for reports ("qd estimated from q", ...).
+  std::string notes;
+  /// States and channels holding estimates or assumed values rather than
+  /// measurements: "qd1".."qdn" differentiated from q, "tau" for free motion
+  /// (torque taken as zero).
+  std::vector<std::string> unmeasured;
+  /// Numbers the reader found about the setup (the IBM double pendulum's marker
+  /// distances "link1_px", "link2_px").
+  std::map<std::string, double> properties;
+
+  /// Whether `name` (a state or channel) was measured.
+  bool IsMeasured(const std::string& name) const {
+    return std::find(unmeasured.begin(), unmeasured.end(), name) == unmeasured.end();
+  }
+
+  /// Sum of the trajectories' samples (T + 1 each).
+  int samples() const {
+    int count = 0;
+    for (const Trajectory& t : trajectories) count += static_cast<int>(t.states.cols());
+    return count;
+  }
 
   /// Sum of the trajectories' transitions.
   int transitions() const {

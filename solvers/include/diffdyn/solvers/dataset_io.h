@@ -5,17 +5,38 @@
 //   pushing CSV (header               pushing (physics/pushing/    one per trajectory
 //     trajectory,step,x,y,theta,...)    system.h)                    number, t_k = k
 //   joint-space CSV (t, q, qd, tau,   joint space: x = (q, qd),    one per `trajectory`
-//     ...; solvers/joint_data.h)        u = the actuated tau         value (or t restart)
+//     ...; below)                       u = the actuated tau         value (or t restart)
 //   panda_gaz2019_traj1/, DeLaN       joint space                  its segments
 //     characters, IBM double pendulum
+//
+// The joint-space CSV (shared/DESIGN.md) has a header naming its columns t,
+// q1..qn, qd1..qn, tau1..taun and optional qdd1..qddn, in any order; n is found
+// from the q columns. Optional: a `trajectory` column (a number or label; a new
+// value starts a new trajectory, t may restart there; without it, t restarting at
+// its first value starts one) and ground-truth columns m1..mn (H qdd), c1..cn
+// (Coriolis and centrifugal), g1..gn (gravity), f1..fn (friction), kinetic,
+// potential. Without qd columns, qd is the central difference of q ("qd1".. are
+// then listed in Dataset::unmeasured). The real datasets, detected from the path:
+//
+//   panda_gaz2019_traj1/   exciting_traj_{time,positions,velocity,torques}.txt
+//                          (7 lines per sample), tau = link-side sensor torque;
+//   ibm_double_pendulum/   headerless runs of pixel markers (pivot, bob 1,
+//                          bob 2); angles q1 = atan2(dy1, dx1) from hanging
+//                          down (gravity points along image +x: the camera is
+//                          turned), q2 relative, unwrapped; 400 Hz, free motion
+//                          (tau = 0, unmeasured), qd estimated; properties
+//                          "link1_px", "link2_px"; a folder reads run 0.csv, a
+//                          file reads that run;
+//   delan_characters/      character_data.csv: one trajectory per character.
 //
 // A joint-space description names the state q1..qn, qd1..qdn and the action
 // tau_j of each actuated joint (by default the joints whose torque is not zero
 // throughout the data: the cart-pole task pushes the cart only); every q_j is an
 // angle (wrapped in the loss, seen as sin/cos by learned models) unless the
-// layout lists joint j as prismatic. The measured torque of every joint stays in the channel "tau", and
-// qdd and the ground-truth components (m, c, g, f, kinetic, potential) in their
-// channels. Errors name the file and line (diffdyn::Error).
+// layout lists joint j as prismatic. The measured torque of every joint stays in
+// the channel "tau", and qdd and the ground-truth components (m, c, g, f,
+// kinetic, potential) in their channels. Every trajectory has at least 3 samples
+// and increasing times. Errors name the file and line (diffdyn::Error).
 //
 //   Dataset data = ReadDataset("cartpole.csv", {.actuated = {1}, .prismatic = {1}});
 //   WriteDataset("copy.csv", data);   // the schema it was read with
@@ -24,8 +45,9 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Core>
+
 #include "diffdyn/models/trajectory.h"
-#include "diffdyn/solvers/joint_data.h"
 
 namespace diffdyn {
 
@@ -48,10 +70,17 @@ struct JointLayout {
 /// `actuated` means every joint here); throws diffdyn::Error for a joint index outside 1..n.
 SystemDescription JointSpaceSystem(int n, const JointLayout& layout = {});
 
-/// The dataset of joint-space measurements: one trajectory per segment, states
-/// [q; qd], actions the actuated torques (the last sample's torque is a channel
-/// only), channels "tau", "qdd" (if present) and the ground truth.
-Dataset JointDataset(const JointData& data, const JointLayout& layout = {});
+/// One run of joint-space measurements at times `t` (N, increasing) as a dataset
+/// of one trajectory: states [q; qd] (q, qd: n x N), actions the actuated joints'
+/// torques (tau: n x N, every joint; the last sample's torque is in the channel
+/// "tau" only), format "joint-csv". Throws diffdyn::Error naming `path` on sizes,
+/// times or non-finite numbers.
+Dataset JointSpaceDataset(const std::string& path, const Eigen::VectorXd& t, const Eigen::MatrixXd& q,
+                          const Eigen::MatrixXd& qd, const Eigen::MatrixXd& tau, const JointLayout& layout = {});
+
+/// n of a joint-space dataset (states [q; qd] with the channel "tau" of n rows in
+/// every trajectory); throws diffdyn::Error naming `data.path` otherwise.
+int JointCount(const Dataset& data);
 
 /// Reads a pushing CSV, a joint-space CSV or a real-data folder (file comment);
 /// `layout` applies to joint-space data. Throws diffdyn::Error naming the file.

@@ -1,8 +1,9 @@
 // Training and scoring DeLaN (models/delan.h) on joint-space measurements.
 //
-// Data: any JointData with q, qd, tau and qdd. Where qdd was not measured it is
-// estimated as `diagnose` does (smoothing.h, 10 Hz cutoff: q, qd, tau smoothed
-// alike, qdd the derivative of the smoothed qd).
+// Data: any joint-space dataset (dataset_io.h) with measured torques, as samples
+// (q, qd, qdd, tau) in no particular order (DelanSamples). Where qdd was not
+// measured it is estimated as `diagnose` does (smoothing.h, 10 Hz cutoff: q, qd,
+// tau smoothed alike, qdd the derivative of the smoothed qd).
 //
 // Split: on the DeLaN characters (format "delan-characters") the authors' split,
 // the characters e, q and v held out for testing and the other 17 for training;
@@ -20,9 +21,9 @@
 // offset-matched); power_mse of dE^/dt + qd^T f^ against qd^T tau; *_nmse the same
 // divided by the total variance; the smallest eigenvalue of H over the samples.
 //
-//   JointData data = ReadMeasured("../shared/data/delan_characters");
+//   Dataset data = ReadDataset("../shared/data/delan_characters");
 //   DelanSplit split = SplitForDelan(data, 0.2, seed);
-//   Delan model = Delan::Initialized({.dof = data.dof()}, seed);
+//   Delan model = Delan::Initialized({.dof = split.train.dof()}, seed);
 //   TrainResult r = TrainDelan(&model, split.train, split.test, DelanTrainDefaults());
 //   DelanScores s = ScoreDelan(model, split.test);
 #pragma once
@@ -31,28 +32,46 @@
 #include <functional>
 #include <map>
 #include <string>
+#include <vector>
 
 #include "diffdyn/models/delan.h"
-#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/models/trajectory.h"
 #include "diffdyn/solvers/training.h"
 
 namespace diffdyn {
 
+/// Joint-space samples for DeLaN, one per column (n x N each), in no time order.
+struct DelanSamples {
+  std::string path;      ///< the dataset they come from (for errors)
+  Eigen::MatrixXd q, qd, qdd, tau;
+  /// Ground-truth channels of the dataset ("m", "c", "g", "f": n x N; "kinetic",
+  /// "potential": 1 x N).
+  std::map<std::string, Eigen::MatrixXd> channels;
+  bool measured_torque = true;  ///< false: free motion, tau taken as zero
+
+  /// n, the number of joints.
+  int dof() const { return static_cast<int>(q.rows()); }
+  /// N, the number of samples.
+  int size() const { return static_cast<int>(q.cols()); }
+};
+
 /// Training and held-out samples, with how they were chosen.
 struct DelanSplit {
-  JointData train, test;
+  DelanSamples train, test;
   /// "characters e, q, v held out" or "seeded split of samples".
   std::string how;
 };
 
-/// `data` with qdd (estimated when absent, see the header comment).
-JointData WithAccelerations(const JointData& data);
+/// Every sample of the joint-space dataset `data` in time order, trajectory after
+/// trajectory, with qdd (estimated when a trajectory lacks the channel "qdd",
+/// see the header comment).
+DelanSamples SamplesOf(const Dataset& data);
 
-/// The samples `index` of `data` (q, qd, qdd, tau and the channels), as one segment.
-JointData SelectSamples(const JointData& data, const std::vector<int>& index);
+/// The samples `index` of `samples` (q, qd, qdd, tau and the channels).
+DelanSamples SelectSamples(const DelanSamples& samples, const std::vector<int>& index);
 
 /// The split of the header comment; throws diffdyn::Error when a side would be empty.
-DelanSplit SplitForDelan(const JointData& data, double val_fraction, std::uint64_t seed);
+DelanSplit SplitForDelan(const Dataset& data, double val_fraction, std::uint64_t seed);
 
 /// The DeLaN authors' training settings: 10,000 epochs of batch 512, Adam with
 /// AMSGrad, learning rate 5e-4, weight decay 1e-5.
@@ -61,8 +80,8 @@ TrainOptions DelanTrainDefaults();
 /// Trains *model in place on `train`, validating on `val` (may be empty: no
 /// validation), on the torque loss with `joint_weights` (Delan::TorqueLoss; empty:
 /// the plain MSE of the DeLaN authors). Throws diffdyn::Error for data of another dof, without qdd, or
-/// without measured torques (free motion: has_tau false).
-TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& val,
+/// without measured torques (free motion).
+TrainResult TrainDelan(Delan* model, const DelanSamples& train, const DelanSamples& val,
                        const TrainOptions& options,
                        const std::function<void(const EpochReport&)>& on_epoch = {},
                        const Eigen::VectorXd& joint_weights = {});
@@ -71,7 +90,7 @@ TrainResult TrainDelan(Delan* model, const JointData& train, const JointData& va
 /// w_j = 1 / Var(tau_j) over `train`; a joint whose torque does not vary (an
 /// unactuated one) gets the largest weight of the others. Throws diffdyn::Error
 /// when no joint's torque varies.
-Eigen::VectorXd BalancedJointWeights(const JointData& train);
+Eigen::VectorXd BalancedJointWeights(const DelanSamples& train);
 
 /// (1/N) sum |y^ - y|^2 over the total variance (1/N) sum |y - mean y|^2 of the
 /// truth y (rows x N): DESIGN.md's *_nmse; NaN when the truth does not vary.
@@ -79,6 +98,6 @@ double NormalizedMse(const Eigen::MatrixXd& predicted, const Eigen::MatrixXd& tr
 
 /// The scores of the header comment, by key ("torque_mse", "inertial_mse", ...,
 /// "torque_nmse", ..., "min_mass_eigenvalue"); keys for channels the data lacks are absent.
-std::map<std::string, double> ScoreDelan(const Delan& model, const JointData& data, int threads = 0);
+std::map<std::string, double> ScoreDelan(const Delan& model, const DelanSamples& data, int threads = 0);
 
 }  // namespace diffdyn

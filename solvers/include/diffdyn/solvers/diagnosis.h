@@ -46,7 +46,7 @@
 #include "diffdyn/solvers/diagnosis/gain.h"
 #include "diffdyn/solvers/diagnosis/prepare.h"
 #include "diffdyn/solvers/diagnosis/selection.h"
-#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/models/trajectory.h"
 
 namespace diffdyn {
 
@@ -105,16 +105,17 @@ struct DiagnosisResult {
   double seconds = 0;
 };
 
-/// Runs the pipeline of the header comment on the model under test `nominal`: an
+/// Runs the pipeline of the header comment on the joint-space dataset `data`
+/// (dataset_io.h) and the model under test `nominal`: an
 /// analytic model (no effects) or an extended model fed back, whose effects stay
 /// and are not named again; named_effects lists only what is added. Throws
 /// diffdyn::Error on a size mismatch naming --model and --measured,
 /// NumericalError on non-finite residuals.
-DiagnosisResult Diagnose(const ExtendedModel& nominal, const JointData& data, const DiagnosisOptions& options);
+DiagnosisResult Diagnose(const ExtendedModel& nominal, const Dataset& data, const DiagnosisOptions& options);
 
 /// Diagnose of the analytic `model` with nominal parameters `params` (its size).
 DiagnosisResult Diagnose(std::shared_ptr<const AnalyticModel> model, const Eigen::VectorXd& params,
-                         const JointData& data, const DiagnosisOptions& options);
+                         const Dataset& data, const DiagnosisOptions& options);
 
 /// The unit of an effect's first parameter on `model` (prismatic joints use N, m).
 std::string EffectUnit(const AnalyticModel& model, const Effect& effect, int param = 0);

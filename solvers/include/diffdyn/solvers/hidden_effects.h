@@ -21,7 +21,7 @@
 #include <vector>
 
 #include "diffdyn/physics/effects.h"
-#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/solvers/dataset_io.h"
 
 namespace diffdyn {
 
@@ -49,7 +49,7 @@ struct HiddenEffectCase {
   Effect effect;              ///< the hidden effect (unset for a control)
   double ratio = 0.0;         ///< its torque RMS / noise RMS
   Eigen::VectorXd tau_noise;  ///< per-joint torque-noise sigma
-  JointData data;
+  Dataset data;  ///< one joint-space trajectory (dataset_io.h)
 };
 
 /// Generates the case of `seed` for `model` (pendulum, cartpole,

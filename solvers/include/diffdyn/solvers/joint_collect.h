@@ -19,7 +19,7 @@
 // Trajectory i draws from its own generator (TrajectoryRng(seed, i)): the data are
 // the same at any thread count.
 //
-//   Dataset data = CollectJointData(JointTaskByName("pendulum"), {.trajectories = 100, .seed = 1});
+//   Dataset data = CollectJointSpace(JointTaskByName("pendulum"), {.trajectories = 100, .seed = 1});
 //   WriteDataset("pendulum.csv", data);
 #pragma once
 
@@ -31,7 +31,7 @@
 
 namespace diffdyn {
 
-/// Settings of CollectJointData (DESIGN.md's defaults).
+/// Settings of CollectJointSpace (DESIGN.md's defaults).
 struct JointCollectOptions {
   int trajectories = 100;
   /// Seconds per trajectory and the sample interval dt (s).
@@ -49,7 +49,7 @@ struct JointCollectOptions {
 /// torques, channels tau, qdd, m, c, g, f, kinetic, potential; format "joint-csv".
 /// Throws diffdyn::Error for bad options and diffdyn::NumericalError when the
 /// simulation diverges.
-Dataset CollectJointData(const JointTask& task, const JointCollectOptions& options);
+Dataset CollectJointSpace(const JointTask& task, const JointCollectOptions& options);
 
 /// Adds the channels of the file comment (tau, qdd, m, c, g, f, kinetic, potential)
 /// to a trajectory of `task`'s plant that has states (q, qd) (2n x K+1) and actions

@@ -31,7 +31,7 @@
 
 #include <Eigen/Core>
 
-#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/models/trajectory.h"
 
 namespace diffdyn {
 
@@ -71,9 +71,11 @@ struct SmoothedData {
   std::vector<int> segment_bounds;  ///< size segments + 1
 };
 
-/// Smooths `data` with cutoff `cutoff_hz` (> 0); throws diffdyn::Error naming
-/// --cutoff-hz when the cutoff leaves fewer than 10 usable rows.
-SmoothedData SmoothJointData(const JointData& data, double cutoff_hz);
+/// Smooths the joint-space dataset `data` (dataset_io.h: states [q; qd], channel
+/// "tau", optional "qdd"; its trajectories side by side in the result) with
+/// cutoff `cutoff_hz` (> 0); throws diffdyn::Error naming --cutoff-hz when the
+/// cutoff leaves fewer than 10 usable rows.
+SmoothedData SmoothJointSpace(const Dataset& data, double cutoff_hz);
 
 // Template implementation.
 template <typename T>

@@ -35,7 +35,7 @@
 
 #include "diffdyn/physics/analytic_model.h"
 #include "diffdyn/physics/effects.h"
-#include "diffdyn/solvers/joint_data.h"
+#include "diffdyn/models/trajectory.h"
 #include "diffdyn/solvers/smoothing.h"
 
 namespace diffdyn {
@@ -50,14 +50,15 @@ inline constexpr double kMaxCutoffHz = 10.0;
 Eigen::VectorXd EstimateWhiteNoise(const Eigen::VectorXd& t, const Eigen::MatrixXd& signal,
                                    const std::vector<int>& segment_starts);
 
-/// True when `data.qd` is the backward difference of `data.q` (header).
-bool IsBackwardDifference(const JointData& data);
+/// True when the velocities qd of the joint-space dataset `data` are the backward
+/// difference of its positions q in every trajectory (header).
+bool IsBackwardDifference(const Dataset& data);
 
 /// `data` with a backward-difference qd moved to the sample times (header).
-JointData RecentreVelocity(const JointData& data);
+Dataset RecentreVelocity(const Dataset& data);
 
 /// The default cutoff min(kMaxCutoffHz, f_s / 4) of `data` (Hz), f_s its median sample rate.
-double DefaultCutoffHz(const JointData& data);
+double DefaultCutoffHz(const Dataset& data);
 
 /// The prepared record every later stage reads.
 struct PreparedData {
@@ -96,6 +97,6 @@ struct PrepareOptions {
 /// with no effects, or an extended model fed back). Throws diffdyn::Error on
 /// sizes, options or a record too short to split, naming --model, --measured or
 /// the option; NumericalError on a non-finite residual.
-PreparedData PrepareData(const ExtendedModel& nominal, const JointData& data, const PrepareOptions& options);
+PreparedData PrepareData(const ExtendedModel& nominal, const Dataset& data, const PrepareOptions& options);
 
 }  // namespace diffdyn
