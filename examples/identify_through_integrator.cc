@@ -36,23 +36,25 @@ struct DampedPendulum {
 };
 
 // `count` noisy swings of `seconds` each, sampled at 50 Hz.
-std::vector<diffdyn::MeasuredTrajectory> Measure(const Eigen::Vector2d& truth, int count, double seconds,
-                                                 diffdyn::Rng& rng) {
+std::vector<diffdyn::Trajectory> Measure(const Eigen::Vector2d& truth, int count, double seconds,
+                                         diffdyn::Rng& rng) {
   using namespace diffdyn;
   OdeOptions fine;
   fine.method = Method::kRk4Classic;
   fine.dt = 1e-4;
-  std::vector<MeasuredTrajectory> data(count);
-  for (MeasuredTrajectory& swing : data) {
+  std::vector<Trajectory> data(count);
+  for (Trajectory& swing : data) {
     const int samples = static_cast<int>(seconds * 50) + 1;
-    for (int i = 0; i < samples; ++i) swing.times.push_back(i / 50.0);
+    std::vector<double> times;
+    for (int i = 0; i < samples; ++i) times.push_back(i / 50.0);
+    swing.t = Eigen::Map<const Eigen::VectorXd>(times.data(), samples);
     swing.states.resize(2, samples);
     Eigen::VectorXd x(2);
     x << Uniform(rng, 0.5, 2.5), Uniform(rng, -1.0, 1.0);
     auto system = [&](const VectorX<double>& s, VectorX<double>& dsdt, double t) {
       DampedPendulum{}(s, dsdt, t, truth.data());
     };
-    IntegrateTimes(system, x, swing.times, fine, [&](int i, double, const VectorX<double>& s) {
+    IntegrateTimes(system, x, times, fine, [&](int i, double, const VectorX<double>& s) {
       swing.states(0, i) = s[0] + 0.01 * StandardNormal(rng);
       swing.states(1, i) = s[1] + 0.05 * StandardNormal(rng);
     });
@@ -67,7 +69,7 @@ int main(int argc, char** argv) {
   const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
   const Eigen::Vector2d truth(9.81, 0.02), initial(7.0, 0.0);
   Rng rng(1);
-  const std::vector<MeasuredTrajectory> data = Measure(truth, quick ? 2 : 4, quick ? 3.0 : 6.0, rng);
+  const std::vector<Trajectory> data = Measure(truth, quick ? 2 : 4, quick ? 3.0 : 6.0, rng);
 
   TrajectoryFitOptions options;
   options.ode.method = Method::kDopri5;

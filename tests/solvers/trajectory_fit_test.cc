@@ -19,12 +19,13 @@ struct Oscillator {
   }
 };
 
-std::vector<MeasuredTrajectory> Simulate(const Eigen::Vector2d& theta, double noise, int count,
-                                         Rng& rng) {
-  std::vector<MeasuredTrajectory> data;
+std::vector<Trajectory> Simulate(const Eigen::Vector2d& theta, double noise, int count, Rng& rng) {
+  std::vector<Trajectory> data;
   for (int k = 0; k < count; ++k) {
-    MeasuredTrajectory d;
-    for (int i = 0; i <= 100; ++i) d.times.push_back(0.05 * i);
+    Trajectory d;
+    std::vector<double> times;
+    for (int i = 0; i <= 100; ++i) times.push_back(0.05 * i);
+    d.t = Eigen::Map<const Eigen::VectorXd>(times.data(), 101);
     d.states.resize(2, 101);
     Eigen::VectorXd x(2);
     x << Uniform(rng, -2, 2), Uniform(rng, -1, 1);
@@ -34,7 +35,7 @@ std::vector<MeasuredTrajectory> Simulate(const Eigen::Vector2d& theta, double no
     auto sys = [&](const VectorX<double>& s, VectorX<double>& dsdt, double t) {
       Oscillator{}(s, dsdt, t, theta.data());
     };
-    IntegrateTimes(sys, x, d.times, fine, [&](int i, double, const VectorX<double>& s) {
+    IntegrateTimes(sys, x, times, fine, [&](int i, double, const VectorX<double>& s) {
       d.states(0, i) = s[0] + noise * StandardNormal(rng);
       d.states(1, i) = s[1] + noise * StandardNormal(rng);
     });
@@ -86,8 +87,8 @@ TEST(TrajectoryFit, PartiallyObservedStateStillIdentifies) {
 }
 
 TEST(TrajectoryFit, BadInputNamesTheProblem) {
-  std::vector<MeasuredTrajectory> data(1);
-  data[0].times = {0.0, 0.1};
+  std::vector<Trajectory> data(1);
+  data[0].t = Eigen::VectorXd::LinSpaced(2, 0.0, 0.1);
   data[0].states = Eigen::MatrixXd::Zero(2, 3);
   EXPECT_THROW(FitTrajectoryParameters<2>(Oscillator{}, data, Eigen::Vector2d(1, 1), {}), Error);
   EXPECT_THROW(FitTrajectoryParameters<2>(Oscillator{}, {}, Eigen::Vector2d(1, 1), {}), Error);
@@ -104,8 +105,8 @@ TEST(TrajectoryFit, BadInputNamesTheProblem) {
 
 TEST(TrajectoryFit, UnidentifiableParameterIsReported) {
   // theta[1] multiplies (q^2 - 1) qd, which is zero on the resting trajectory q = 1, qd = 0.
-  std::vector<MeasuredTrajectory> data(1);
-  data[0].times = {0.0, 0.5, 1.0, 1.5};
+  std::vector<Trajectory> data(1);
+  data[0].t = Eigen::VectorXd::LinSpaced(4, 0.0, 1.5);
   data[0].states = Eigen::MatrixXd::Zero(2, 4);
   TrajectoryFitOptions options;
   options.fit_initial_state = false;

@@ -52,15 +52,9 @@
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/autodiff_ode/integrate.h"
+#include "diffdyn/models/trajectory.h"
 
 namespace diffdyn {
-
-/// One measured trajectory: times t_0 < ... < t_{T-1} (T >= 2) and states n x T
-/// (column i = x(t_i)). Entries that are not observed may hold anything finite.
-struct MeasuredTrajectory {
-  std::vector<double> times;
-  Eigen::MatrixXd states;
-};
 
 /// Options of FitTrajectoryParameters.
 struct TrajectoryFitOptions {
@@ -97,9 +91,10 @@ namespace internal {
 template <typename Model>
 class TrajectoryResidual {
  public:
-  TrajectoryResidual(const Model& model, const MeasuredTrajectory& data,
+  TrajectoryResidual(const Model& model, const Trajectory& data,
                      const std::vector<int>& observed, const OdeOptions& ode, bool fit_x0)
-      : model_(model), data_(data), observed_(observed), ode_(ode), fit_x0_(fit_x0) {}
+      : model_(model), data_(data), times_(data.t.data(), data.t.data() + data.t.size()),
+        observed_(observed), ode_(ode), fit_x0_(fit_x0) {}
 
   template <typename T>
   bool operator()(T const* const* blocks, T* residuals) const {
@@ -115,7 +110,7 @@ class TrajectoryResidual {
     // A trial point whose flow fails (blows up, step-size underflow) is reported to
     // Ceres as an infeasible step, which shrinks the trust region; it is not an error.
     try {
-      IntegrateTimes(system, x, data_.times, ode_, [&](int i, double, const VectorX<T>& state) {
+      IntegrateTimes(system, x, times_, ode_, [&](int i, double, const VectorX<T>& state) {
         if (i < first) return;
         for (int j = 0; j < m; ++j) {
           residuals[(i - first) * m + j] = state[observed_[j]] - data_.states(observed_[j], i);
@@ -129,7 +124,8 @@ class TrajectoryResidual {
 
  private:
   const Model& model_;
-  const MeasuredTrajectory& data_;
+  const Trajectory& data_;
+  std::vector<double> times_;  // data_.t for the integrator
   const std::vector<int>& observed_;
   OdeOptions ode_;
   bool fit_x0_;
@@ -139,12 +135,14 @@ class TrajectoryResidual {
 
 /// Fits theta (kNumParams entries, starting at `initial`) so that the flow of
 /// `model` from each trajectory's first sample matches its later samples (see the
-/// header comment). Throws diffdyn::Error for empty data, bad sizes or non-finite
+/// header comment). Each trajectory (models/trajectory.h) gives times t_0 < ... <
+/// t_{T-1} (T >= 2) and states n x T (column i = x(t_i); entries that are not
+/// observed may hold anything finite); its actions and channels are not used. Throws diffdyn::Error for empty data, bad sizes or non-finite
 /// measurements; diffdyn::NumericalError if the integration fails at the optimum
 /// or the covariance is singular (parameters not identifiable from the data).
 template <int kNumParams, typename Model>
 TrajectoryFitResult FitTrajectoryParameters(const Model& model,
-                                            const std::vector<MeasuredTrajectory>& data,
+                                            const std::vector<Trajectory>& data,
                                             const Eigen::Matrix<double, kNumParams, 1>& initial,
                                             const TrajectoryFitOptions& options) {
   static_assert(kNumParams > 0, "FitTrajectoryParameters needs at least one parameter");
@@ -159,10 +157,9 @@ TrajectoryFitResult FitTrajectoryParameters(const Model& model,
   }
   for (std::size_t k = 0; k < data.size(); ++k) {
     const auto& d = data[k];
-    DIFFDYN_CHECK(d.states.rows() == n && d.states.cols() == static_cast<int>(d.times.size()) &&
-                      d.times.size() >= 2,
+    DIFFDYN_CHECK(d.states.rows() == n && d.states.cols() == d.t.size() && d.t.size() >= 2,
                   "trajectory ", k, ": states are ", d.states.rows(), "x", d.states.cols(),
-                  " for ", d.times.size(), " times; expected ", n, "xT with T >= 2");
+                  " for ", d.t.size(), " times; expected ", n, "xT with T >= 2");
     DIFFDYN_CHECK(d.states.allFinite(), "trajectory ", k, " has non-finite measurements");
   }
 
@@ -175,13 +172,13 @@ TrajectoryFitResult FitTrajectoryParameters(const Model& model,
   for (const auto& d : data) result.initial_states.push_back(d.states.col(0));
 
   // Builds the problem on the first `fraction` of every trajectory (at least 2 samples).
-  std::vector<MeasuredTrajectory> prefixes(data.size());
+  std::vector<Trajectory> prefixes(data.size());
   auto build = [&](double fraction, ceres::Problem& problem) {
     int num_residuals = 0;
     for (std::size_t k = 0; k < data.size(); ++k) {
-      const int total = static_cast<int>(data[k].times.size());
+      const int total = static_cast<int>(data[k].t.size());
       const int keep = std::clamp(static_cast<int>(std::ceil(fraction * total)), 2, total);
-      prefixes[k].times.assign(data[k].times.begin(), data[k].times.begin() + keep);
+      prefixes[k].t = data[k].t.head(keep);
       prefixes[k].states = data[k].states.leftCols(keep);
       const int samples = keep - (options.fit_initial_state ? 0 : 1);
       const int count = samples * static_cast<int>(observed.size());
