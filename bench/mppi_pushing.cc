@@ -5,6 +5,8 @@
 //   BM_MppiAbsNode/T/threads   abs-NODE 6-100-100-6 ReLU, rk4 3/8 rule on 10 grid
 //                              points (9 steps), T = 20 and 30, 1 and 2 threads
 //   BM_MppiResNn/30/threads    res-NN 6-100-100-3 ReLU, T = 30
+//   BM_MppiAbsNodeF32, BM_MppiResNnF32   the same in float32 (the models' batched
+//                              paths in float, LearnedModelConfig::precision)
 //   (a third argument is the chunk size, 0 = MppiOptions' default; BM_MppiChunks
 //    tries others at T = 20 on 2 threads)
 //   BM_PeakDgemm*2Threads      the machine's two-thread dgemm peak, Eigen and OpenBLAS
@@ -40,23 +42,27 @@ namespace {
 
 constexpr int kSamples = 1000;
 
-LearnedModel MakeModel(LearnedKind type) {
+LearnedModel MakeModel(LearnedKind type, Precision precision) {
   LearnedModelConfig config;
   config.type = type;
   config.hidden = 100;
   config.method = Method::kRk4;
   config.steps = 10;
+  config.precision = precision;
   return LearnedModel::Initialized(config, 42);
 }
 
-const LearnedModel& AbsNode() {
-  static const LearnedModel model = MakeModel(LearnedKind::kAbsNode);
-  return model;
+// The same weights in either precision (the parameters stay double).
+const LearnedModel& AbsNode(Precision precision = Precision::kF64) {
+  static const LearnedModel f64 = MakeModel(LearnedKind::kAbsNode, Precision::kF64);
+  static const LearnedModel f32 = MakeModel(LearnedKind::kAbsNode, Precision::kF32);
+  return precision == Precision::kF32 ? f32 : f64;
 }
 
-const LearnedModel& ResNn() {
-  static const LearnedModel model = MakeModel(LearnedKind::kResNn);
-  return model;
+const LearnedModel& ResNn(Precision precision = Precision::kF64) {
+  static const LearnedModel f64 = MakeModel(LearnedKind::kResNn, Precision::kF64);
+  static const LearnedModel f32 = MakeModel(LearnedKind::kResNn, Precision::kF32);
+  return precision == Precision::kF32 ? f32 : f64;
 }
 
 // The seed's MPPI settings for the obstacle task.
@@ -106,6 +112,16 @@ BENCHMARK(BM_MppiAbsNode)
 
 void BM_MppiResNn(benchmark::State& state) { RunCommands(state, ResNn(), 1); }
 BENCHMARK(BM_MppiResNn)
+    ->Args({30, 1, 0})->Args({30, 2, 0})
+    ->UseRealTime()->MeasureProcessCPUTime()->Unit(benchmark::kMillisecond)->MinTime(0.5);
+
+void BM_MppiAbsNodeF32(benchmark::State& state) { RunCommands(state, AbsNode(Precision::kF32), 36); }
+BENCHMARK(BM_MppiAbsNodeF32)
+    ->Args({20, 1, 0})->Args({20, 2, 0})->Args({30, 1, 0})->Args({30, 2, 0})
+    ->UseRealTime()->MeasureProcessCPUTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
+
+void BM_MppiResNnF32(benchmark::State& state) { RunCommands(state, ResNn(Precision::kF32), 1); }
+BENCHMARK(BM_MppiResNnF32)
     ->Args({30, 1, 0})->Args({30, 2, 0})
     ->UseRealTime()->MeasureProcessCPUTime()->Unit(benchmark::kMillisecond)->MinTime(0.5);
 

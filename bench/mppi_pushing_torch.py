@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """PyTorch reference for bench/mppi_pushing.cc.
 
-A plain MPPI in PyTorch, float64, single-threaded, the algorithm of the seed's
+A plain MPPI in PyTorch, in float64 and in float32, the algorithm of the seed's
 pytorch_mppi (and of solvers/mppi.h): warm start by shifting, K x T x 3 Gaussian
 noise with covariance Sigma = 0.5 I, clamp to the action bounds and recompute the
 perturbation, batched rollout of the model over the K samples, running cost
@@ -11,35 +11,38 @@ U (lambda noise Sigma^-1), softmax weights with lambda = 0.01, U += sum_k w_k no
 
 The models are the SAME weights as the C++ run: the model files mppi_abs_node.json
 (6-100-100-6 ReLU NeuralODE, 3/8-rule RK4 on 10 grid points) and mppi_res_nn.json
-(6-100-100-3 ReLU residual NN) that bench_mppi_pushing writes next to its results.
-Prints the BLAS torch uses, ms per command (wall and CPU), and the ratios against the
-C++ results of the same run (mppi_pushing.json next to --out), if present.
+(6-100-100-3 ReLU residual NN) that bench_mppi_pushing writes next to its results
+(--models, else the folder of --out, else build/bench-results). PyTorch runs in each
+two-core configuration (torch_common.TWO_CORE_CONFIGS: torch 2 threads with OpenBLAS 1,
+torch 1 with OpenBLAS 2), each in its own process; the faster one per workload is
+compared with our two-thread run of the same precision (mppi_pushing.json next to
+--out): ms per command and ours / PyTorch.
 
-    OPENBLAS_NUM_THREADS=1 /usr/bin/python3 bench/mppi_pushing_torch.py --out r.json
+    /usr/bin/python3 bench/mppi_pushing_torch.py --out build/bench-results/mppi_pushing_torch.json
 """
-import argparse
 import json
 import math
 import os
+import sys
 
 import torch
 
-from torch_common import blas_in_use, rk4_38_flow, time_it
+from torch_common import describe_torch, rk4_38_flow, time_it, two_core_reference
 
 K = 1000
 START = (0.4, 0.0, -0.2 * math.pi)
 GOAL = (0.8, -0.1, 0.0)
 
 
-def load_mlp(path):
-    """A torch MLP (ReLU) with the flat parameters of a diffdyn model file:
+def load_mlp(path, dtype):
+    """A torch MLP (ReLU) in `dtype` with the flat parameters of a diffdyn model file:
     theta = [vec(W_0), b_0, vec(W_1), b_1, ...], each W_l column-major (out x in)."""
     spec = json.load(open(path))
     sizes = spec["architecture"]["mlp"]["sizes"]
-    theta = torch.tensor(spec["parameters"]["values"], dtype=torch.float64)
+    theta = torch.tensor(spec["parameters"]["values"], dtype=torch.float64).to(dtype)
     layers, offset = [], 0
     for n_in, n_out in zip(sizes, sizes[1:]):
-        linear = torch.nn.Linear(n_in, n_out).double()
+        linear = torch.nn.Linear(n_in, n_out).to(dtype)
         w = theta[offset:offset + n_in * n_out].reshape(n_in, n_out).t()
         offset += n_in * n_out
         b = theta[offset:offset + n_out]
@@ -81,7 +84,7 @@ def in_collision(x):
     apart = (dx.abs() >= hx + hb * (c + s)) | (dy.abs() >= hy + hb * (s + c)) \
         | ((cs * dx + sn * dy).abs() >= hb + hx * c + hy * s) \
         | ((-sn * dx + cs * dy).abs() >= hb + hx * s + hy * c)
-    return (~apart).double()
+    return (~apart).to(x.dtype)
 
 
 def running_cost(x, goal):
@@ -90,26 +93,26 @@ def running_cost(x, goal):
 
 
 class Mppi:
-    def __init__(self, model, horizon, gen):
-        self.model, self.T, self.gen = model, horizon, gen
-        self.sigma = 0.5 * torch.eye(3, dtype=torch.float64)
+    def __init__(self, model, horizon, gen, dtype):
+        self.model, self.T, self.gen, self.dtype = model, horizon, gen, dtype
+        self.sigma = 0.5 * torch.eye(3, dtype=dtype)
         self.chol = torch.linalg.cholesky(self.sigma)
         self.sigma_inv = torch.linalg.inv(self.sigma)
         self.lam = 0.01
-        self.u_min = torch.tensor([-1.0, -math.pi / 2, 0.0], dtype=torch.float64)
-        self.u_max = torch.tensor([1.0, math.pi / 2, 1.0], dtype=torch.float64)
-        self.goal = torch.tensor(GOAL, dtype=torch.float64)
-        u = torch.randn(horizon, 3, generator=gen, dtype=torch.float64) @ self.chol.t()
+        self.u_min = torch.tensor([-1.0, -math.pi / 2, 0.0], dtype=dtype)
+        self.u_max = torch.tensor([1.0, math.pi / 2, 1.0], dtype=dtype)
+        self.goal = torch.tensor(GOAL, dtype=dtype)
+        u = torch.randn(horizon, 3, generator=gen, dtype=dtype) @ self.chol.t()
         self.U = torch.max(torch.min(u, self.u_max), self.u_min)
 
     @torch.no_grad()
     def command(self, x0):
         self.U = torch.roll(self.U, -1, dims=0)
         self.U[-1] = 0.0
-        noise = torch.randn(K, self.T, 3, generator=self.gen, dtype=torch.float64) @ self.chol.t()
+        noise = torch.randn(K, self.T, 3, generator=self.gen, dtype=self.dtype) @ self.chol.t()
         perturbed = torch.max(torch.min(self.U + noise, self.u_max), self.u_min)
         noise = perturbed - self.U
-        cost = torch.zeros(K, dtype=torch.float64)
+        cost = torch.zeros(K, dtype=self.dtype)
         x = x0.expand(K, 3)
         for t in range(self.T):
             x = self.model(x, perturbed[:, t])
@@ -121,85 +124,76 @@ class Mppi:
         return self.U[0]
 
 
-def time_commands(model, horizon, repeats):
-    """Median (wall, CPU) seconds of one command from START, after a warm-up."""
-    mppi = Mppi(model, horizon, torch.Generator().manual_seed(1))
-    x0 = torch.tensor(START, dtype=torch.float64)
-    return time_it(lambda: mppi.command(x0), repeats)
+def time_commands(model, horizon, repeats, dtype):
+    """Median wall seconds of one command from START, after a warm-up."""
+    mppi = Mppi(model, horizon, torch.Generator().manual_seed(1), dtype)
+    x0 = torch.tensor(START, dtype=dtype)
+    return time_it(lambda: mppi.command(x0), repeats)[0]
 
 
-def ours(bench, prefix):
-    """(wall, cpu) seconds of the C++ benchmark whose name starts with `prefix`."""
+# Workloads: (name, model file, horizon, our benchmark without its precision suffix).
+CASES = [("abs_node_t20", "mppi_abs_node.json", 20, "BM_MppiAbsNode/20"),
+         ("abs_node_t30", "mppi_abs_node.json", 30, "BM_MppiAbsNode/30"),
+         ("res_nn_t30", "mppi_res_nn.json", 30, "BM_MppiResNn/30")]
+PRECISIONS = {"f64": torch.float64, "f32": torch.float32}
+
+
+def models_folder():
+    """Where bench_mppi_pushing wrote the model files (the --out folder of the run)."""
+    out = next((a.split("=", 1)[1] for a in sys.argv if a.startswith("--out=")), None)
+    if out is None and "--out" in sys.argv:
+        out = sys.argv[sys.argv.index("--out") + 1]
+    return os.environ.get("MPPI_MODELS") or os.path.abspath(os.path.dirname(out) if out else "build/bench-results")
+
+
+def measure(torch_threads):
+    """Median seconds per command of each workload and precision, keyed 'f64/abs_node_t20'."""
+    describe_torch(torch_threads)
+    folder = os.environ["MPPI_MODELS"]
+    results = {}
+    for precision, dtype in PRECISIONS.items():
+        for name, file, horizon, _ in CASES:
+            net, spec = load_mlp(os.path.join(folder, file), dtype)
+            model = AbsNode(net, spec["architecture"]["steps"]) if name.startswith("abs") else ResNn(net)
+            results[f"{precision}/{name}"] = time_commands(model, horizon, 5 if name.startswith("abs") else 20,
+                                                           dtype)
+    return results
+
+
+def ours_two_threads(path):
+    """Our two-thread wall seconds per 'precision/workload' in mppi_pushing.json."""
+    with open(path) as f:
+        bench = json.load(f)["benchmarks"]
+    scale = {"ms": 1e-3, "us": 1e-6, "ns": 1e-9, "s": 1}
+    ours = {}
     for b in bench:
-        if b.get("run_type", "iteration") == "iteration" and b["name"].startswith(prefix + "/"):
-            scale = {"ms": 1e-3, "us": 1e-6, "ns": 1e-9, "s": 1}[b["time_unit"]]
-            return b["real_time"] * scale, b["cpu_time"] * scale, b
-    return None
+        if b.get("run_type", "iteration") != "iteration":
+            continue
+        for name, _, _, prefix in CASES:
+            for precision, suffix in (("f64", ""), ("f32", "F32")):
+                family, args = prefix.split("/", 1)
+                if b["name"].startswith(f"{family}{suffix}/{args}/2/"):
+                    ours[f"{precision}/{name}"] = b["real_time"] * scale[b["time_unit"]]
+    return ours
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--out", default="mppi_pushing_torch.json")
-    parser.add_argument("--models", default=None,
-                        help="folder of mppi_abs_node.json / mppi_res_nn.json (default: that of --out)")
-    parser.add_argument("--repeats", type=int, default=5)
-    args = parser.parse_args()
-    folder = args.models or os.path.dirname(os.path.abspath(args.out))
-    torch.set_num_threads(1)
-    blas = blas_in_use()
-    print("torch", torch.__version__, "threads", torch.get_num_threads(),
-          "OPENBLAS_NUM_THREADS", os.environ.get("OPENBLAS_NUM_THREADS"))
-    print("BLAS in use:", ", ".join(blas) if blas else "(none found in /proc/self/maps)")
-    net, spec = load_mlp(os.path.join(folder, "mppi_abs_node.json"))
-    node = AbsNode(net, spec["architecture"]["steps"])
-    res_net, _ = load_mlp(os.path.join(folder, "mppi_res_nn.json"))
-    res = ResNn(res_net)
-
-    cases = [("abs_node_t20", node, 20, "BM_MppiAbsNode/20"),
-             ("abs_node_t30", node, 30, "BM_MppiAbsNode/30"),
-             ("res_nn_t30", res, 30, "BM_MppiResNn/30")]
-    result = {"blas": blas, "torch": torch.__version__}
-    timings = {}
-    for name, model, horizon, _ in cases:
-        repeats = args.repeats if name.startswith("abs") else 4 * args.repeats
-        wall, cpu = time_commands(model, horizon, repeats)
-        timings[name] = (wall, cpu)
-        result[name + "_seconds"], result[name + "_cpu_seconds"] = wall, cpu
-        print(f"PyTorch MPPI {name}, K = {K}, T = {horizon}, float64: median "
-              f"{wall * 1e3:.1f} ms wall, {cpu * 1e3:.1f} ms CPU per command over {repeats}")
-    with open(args.out, "w") as f:
-        json.dump(result, f)
-
-    # Side by side with the C++ run written next to --out.
-    ours_path = os.path.join(os.path.dirname(os.path.abspath(args.out)), "mppi_pushing.json")
-    if not os.path.exists(ours_path):
+    os.environ["MPPI_MODELS"] = models_folder()
+    run = two_core_reference(__file__, measure)
+    if run is None:
         return
-    bench = json.load(open(ours_path))["benchmarks"]
-    peak = None  # the best two-thread dgemm, Eigen or OpenBLAS
-    for b in bench:
-        if b["name"].startswith(("BM_PeakDgemm2Threads", "BM_PeakDgemmOpenBlas2Threads")):
-            if b.get("GFLOP/s") and (peak is None or b["GFLOP/s"] > peak):
-                peak = b["GFLOP/s"]
-    for name, _, horizon, prefix in cases:
-        wall, cpu = timings[name]
-        for threads in (1, 2):
-            r = ours(bench, f"{prefix}/{threads}")
-            if r is None:
-                continue
-            our_wall, our_cpu, b = r
-            line = (f"{name}, {threads} thread(s): ours {our_wall * 1e3:.1f} ms wall "
-                    f"({our_cpu * 1e3:.1f} ms CPU); PyTorch / ours = {wall / our_wall:.2f}x wall")
-            if threads == 1:
-                line += f", {cpu / our_cpu:.2f}x CPU"
-            flops = b.get("command_flops_G")
-            if flops:
-                # Dense-equivalent: ours skips ReLU units that are zero for a whole
-                # block of samples, so the rate can pass the dgemm peak.
-                line += f"; {flops / our_wall:.1f} dense-equivalent GFLOP/s"
-                if peak and threads == 2:
-                    line += f" = {100 * flops / our_wall / peak:.0f}% of the 2-thread dgemm peak {peak:.1f}"
-                line += f" (PyTorch {flops / wall:.1f})"
-            print(line)
+    args, by_config, best = run
+    ours_path = os.path.join(os.path.dirname(os.path.abspath(args.out or "x")), "mppi_pushing.json")
+    ours = ours_two_threads(ours_path) if os.path.exists(ours_path) else {}
+    ratios = {}
+    for key, entry in best.items():
+        if key in ours:
+            ratios[key] = ours[key] / entry["seconds"]
+            print(f"MPPI {key}, K = {K}: ours (2 threads) {ours[key] * 1e3:.1f} ms, PyTorch best "
+                  f"({entry['config']}) {entry['seconds'] * 1e3:.1f} ms; ours / PyTorch = {ratios[key]:.2f}x")
+    if args.out:
+        with open(args.out, "w") as f:
+            json.dump({"by_config": by_config, "best": best, "ours_over_torch": ratios}, f, indent=1)
 
 
 if __name__ == "__main__":

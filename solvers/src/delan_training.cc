@@ -34,6 +34,7 @@ double NormalizedMse(const Eigen::MatrixXd& predicted, const Eigen::MatrixXd& tr
 
 DelanSamples SamplesOf(const Dataset& data) {
   const int n = JointCount(data), count = data.samples();
+  DIFFDYN_CHECK(count > 0, data.path, ": no samples");
   DelanSamples out;
   out.path = data.path;
   out.measured_torque = data.IsMeasured("tau");
