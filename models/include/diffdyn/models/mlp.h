@@ -439,8 +439,8 @@ class Mlp {
 
   /// Values only: Y = f(X) for the batch X (n_0 x B) into Y (n_L x B, sized by
   /// the caller), keeping no tape: a Backward on `ws` afterwards needs a Forward
-  /// first. Equal to Forward's Y up to rounding (about 1e-15 relative). Where
-  /// kHaveLayerKernel holds (AVX-512), blocks of kLayerBlock samples run through
+  /// first. Equal to Forward's Y up to rounding (about 1e-15 relative in double). Where
+  /// kHaveLayerKernel holds (AVX-512 or AVX2), blocks of kLayerBlock samples run through
   /// all layers in registers and cache (layer_kernel.h), ReLU and bias fused into
   /// the products, skipping the ReLU units that are zero for the whole block (their
   /// terms are w * 0); each sample's value then does not depend on the batch, the
@@ -596,8 +596,9 @@ class Mlp {
   // Whether hidden layer l's g' is read off its output instead of stored: ReLU's
   // g' = [g > 0], on a forward pass without the Jacobian chain (which needs the
   // stored g'). Half the memory traffic of a training tape.
-  // Whether Evaluate runs the AVX-512 layer kernel (double only).
-  static constexpr bool kUseLayerKernel = kHaveLayerKernel && std::is_same_v<T, double>;
+  // Whether Evaluate runs the layer kernel (AVX-512 or AVX2 targets; double and float).
+  static constexpr bool kUseLayerKernel =
+      kHaveLayerKernel && (std::is_same_v<T, double> || std::is_same_v<T, float>);
 
   bool DerivativeFromOutput(const typename Workspace::Chunk& ch, int l) const {
     return !ch.has_jacobian && arch_.activations[l].kind == ActivationKind::kRelu;
@@ -677,19 +678,19 @@ class Mlp {
     constexpr int kB = kLayerBlock;
     const int nb = static_cast<int>(x.cols());
     const int L = arch_.num_layers();
-    double* const first = ch->block.data();
-    double* const second = first + Eigen::Index(arch_.max_width()) * kB;
+    B* const first = ch->block.data();
+    B* const second = first + Eigen::Index(arch_.max_width()) * kB;
     int* const rows_first = ch->rows.data();
     int* const rows_second = rows_first + arch_.max_width();
     for (int s0 = 0; s0 < nb; s0 += kB) {
       const int ns = std::min(kB, nb - s0);
       for (int i = 0; i < num_inputs(); ++i) {
-        double* row = first + i * kB;
+        B* row = first + i * kB;
         for (int s = 0; s < ns; ++s) row[s] = x(i, s0 + s);
-        std::fill(row + ns, row + kB, 0.0);
+        std::fill(row + ns, row + kB, B(0));
       }
-      double* in = first;
-      double* out = second;
+      B* in = first;
+      B* out = second;
       int* in_rows = rows_first;
       int* out_rows = rows_second;
       int n_in = num_inputs();
