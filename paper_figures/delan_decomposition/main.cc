@@ -284,12 +284,7 @@ std::map<std::string, double> FeedForwardScores(const FeedForward& ff, const Del
 void WriteCartpoleSeries(const fs::path& path, const Dataset& run, const Delan& full, const Delan& under,
                          const FeedForward& ff) {
   const DelanSamples d = SamplesOf(run);
-  Eigen::VectorXd times(d.size());
-  for (Eigen::Index i = 0, k = 0; i < static_cast<Eigen::Index>(run.trajectories.size()); ++i) {
-    const Eigen::VectorXd& t = run.trajectories[i].t;
-    times.segment(k, t.size()) = t;
-    k += t.size();
-  }
+  const Eigen::RowVectorXd times = StackTrajectories(run, [](const Trajectory& t) { return t.t.transpose(); });
   DelanWorkspace ws;
   const DelanParts pf = full.Decompose(d.q, d.qd, d.qdd, &ws), pu = under.Decompose(d.q, d.qd, d.qdd, &ws);
   const DelanParts pff = FeedForwardParts(ff, d);

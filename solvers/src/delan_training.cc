@@ -33,41 +33,31 @@ double NormalizedMse(const Eigen::MatrixXd& predicted, const Eigen::MatrixXd& tr
 }
 
 DelanSamples SamplesOf(const Dataset& data) {
-  const int n = JointCount(data), count = data.samples();
-  DIFFDYN_CHECK(count > 0, data.path, ": no samples");
+  const int n = JointCount(data);
+  DIFFDYN_CHECK(data.samples() > 0, data.path, ": no samples");
   DelanSamples out;
   out.path = data.path;
   out.measured_torque = data.IsMeasured("tau");
   bool has_qdd = true;
   for (const Trajectory& t : data.trajectories) has_qdd = has_qdd && t.channels.count("qdd");
-  if (!has_qdd) {
+  if (has_qdd) {
+    out.q = StackTrajectories(data, [n](const Trajectory& t) { return t.states.topRows(n); });
+    out.qd = StackTrajectories(data, [n](const Trajectory& t) { return t.states.bottomRows(n); });
+    out.qdd = StackChannel(data, "qdd");
+    out.tau = StackChannel(data, "tau");
+  } else {
     // Estimated as diagnose does: q, qd, tau smoothed alike, qdd = d/dt of smoothed qd.
     const SmoothedData s = SmoothJointSpace(data, 10.0);
     out.q = s.q;
     out.qd = s.qd;
     out.qdd = s.qdd;
     out.tau = s.tau;
-  } else {
-    for (Eigen::MatrixXd* m : {&out.q, &out.qd, &out.qdd, &out.tau}) m->resize(n, count);
   }
-  // The channels every trajectory has (and, with measured qdd, the raw signals).
-  const Trajectory& first = data.trajectories.front();
-  for (const auto& [name, values] : first.channels) {
+  // The ground-truth channels every trajectory has.
+  for (const auto& [name, values] : data.trajectories.front().channels) {
     bool everywhere = name != "tau" && name != "qdd";
     for (const Trajectory& t : data.trajectories) everywhere = everywhere && t.channels.count(name);
-    if (everywhere) out.channels[name].resize(values.rows(), count);
-  }
-  int a = 0;
-  for (const Trajectory& t : data.trajectories) {
-    const int m = static_cast<int>(t.states.cols());
-    if (has_qdd) {
-      out.q.middleCols(a, m) = t.states.topRows(n);
-      out.qd.middleCols(a, m) = t.states.bottomRows(n);
-      out.qdd.middleCols(a, m) = t.channels.at("qdd");
-      out.tau.middleCols(a, m) = t.channels.at("tau");
-    }
-    for (auto& [name, values] : out.channels) values.middleCols(a, m) = t.channels.at(name);
-    a += m;
+    if (everywhere) out.channels[name] = StackChannel(data, name);
   }
   return out;
 }

@@ -22,23 +22,15 @@ SmoothedData SmoothJointSpace(const Dataset& data, double cutoff_hz) {
   // The trajectories side by side: raw signals and segment bounds.
   bool has_qdd = true;
   for (const Trajectory& t : data.trajectories) has_qdd = has_qdd && t.channels.count("qdd");
-  out.t.resize(count);
-  out.q_raw.resize(n, count);
-  out.qd_raw.resize(n, count);
-  out.tau_raw.resize(n, count);
-  Eigen::MatrixXd qdd_raw(has_qdd ? n : 0, count);
-  int a = 0;
+  out.t = StackTrajectories(data, [](const Trajectory& t) { return t.t.transpose(); }).transpose();
+  out.q_raw = StackTrajectories(data, [n](const Trajectory& t) { return t.states.topRows(n); });
+  out.qd_raw = StackTrajectories(data, [n](const Trajectory& t) { return t.states.bottomRows(n); });
+  out.tau_raw = StackChannel(data, "tau");
+  const Eigen::MatrixXd qdd_raw = has_qdd ? StackChannel(data, "qdd") : Eigen::MatrixXd();
+  out.segment_bounds = {0};
   for (const Trajectory& t : data.trajectories) {
-    const int m = static_cast<int>(t.states.cols());
-    out.segment_bounds.push_back(a);
-    out.t.segment(a, m) = t.t;
-    out.q_raw.middleCols(a, m) = t.states.topRows(n);
-    out.qd_raw.middleCols(a, m) = t.states.bottomRows(n);
-    out.tau_raw.middleCols(a, m) = t.channels.at("tau");
-    if (has_qdd) qdd_raw.middleCols(a, m) = t.channels.at("qdd");
-    a += m;
+    out.segment_bounds.push_back(out.segment_bounds.back() + static_cast<int>(t.states.cols()));
   }
-  out.segment_bounds.push_back(count);
   out.q.resize(n, count);
   out.qd.resize(n, count);
   out.qdd.resize(n, count);

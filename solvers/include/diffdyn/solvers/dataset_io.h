@@ -78,6 +78,36 @@ SystemDescription JointSpaceSystem(int n, const JointLayout& layout = {});
 Dataset JointSpaceDataset(const std::string& path, const Eigen::VectorXd& t, const Eigen::MatrixXd& q,
                           const Eigen::MatrixXd& qd, const Eigen::MatrixXd& tau, const JointLayout& layout = {});
 
+/// The matrices of(t) of every trajectory t side by side, trajectory after
+/// trajectory: rows x data.samples(), where of(t) is rows x (T + 1) (a block of
+/// t.states, a channel, t.t.transpose(), ...). Throws diffdyn::Error naming
+/// data.path when the row counts differ.
+template <typename Of>
+Eigen::MatrixXd StackTrajectories(const Dataset& data, Of&& of) {
+  Eigen::MatrixXd out;
+  Eigen::Index column = 0;
+  for (const Trajectory& t : data.trajectories) {
+    const auto& block = of(t);
+    if (column == 0) out.resize(block.rows(), data.samples());
+    DIFFDYN_CHECK(block.rows() == out.rows() && block.cols() == t.states.cols(), data.path, ": trajectory ",
+                  t.label, " gives ", block.rows(), "x", block.cols(), " where ", out.rows(), "x",
+                  t.states.cols(), " is needed");
+    out.middleCols(column, block.cols()) = block;
+    column += block.cols();
+  }
+  return out;
+}
+
+/// The channel `name` of every trajectory side by side (StackTrajectories); throws
+/// diffdyn::Error when a trajectory lacks it.
+inline Eigen::MatrixXd StackChannel(const Dataset& data, const std::string& name) {
+  return StackTrajectories(data, [&](const Trajectory& t) -> const Eigen::MatrixXd& {
+    const auto it = t.channels.find(name);
+    DIFFDYN_CHECK(it != t.channels.end(), data.path, ": trajectory ", t.label, " has no channel '", name, "'");
+    return it->second;
+  });
+}
+
 /// n of a joint-space dataset (states [q; qd] with the channel "tau" of n rows in
 /// every trajectory); throws diffdyn::Error naming `data.path` otherwise.
 int JointCount(const Dataset& data);
