@@ -8,8 +8,9 @@ input Jacobian carried through the layers in closed form (B x width x n); H = L 
 0.01 I, dL/dq_k from the Jacobian, c = Hdot qd - 1/2 [qd^T dH/dq_k qd]_k, g = dV/dq,
 tau = H qdd + c + g; loss mean |tau^ - tau|^2; autograd for the parameter gradient;
 Adam with AMSGrad, lr 5e-4, weight decay 1e-5; batch 512 over the 2459 training
-samples of the DeLaN characters (5 batches), float64. Timed on 1 and 2 torch threads;
-the best is PyTorch at its fastest. Prints the ratios to the C++ run of the same
+samples of the DeLaN characters (5 batches), in float64 and in float32 (the rows
+BM_DelanEpoch and BM_DelanEpochF32). Timed on 1 and 2 torch threads; the best is
+PyTorch at its fastest. Prints the ratios to the C++ run of the same
 `make bench` (delan_training.json next to --out).
 
     MALLOC_MMAP_THRESHOLD_=1000000000 MALLOC_TRIM_THRESHOLD_=1000000000 \
@@ -43,12 +44,12 @@ def read_characters(path):
 
 
 class Delan(torch.nn.Module):
-    def __init__(self, n):
+    def __init__(self, n, dtype):
         super().__init__()
         self.n = n
         self.m = 1 + n * (n + 1) // 2
         self.layers = torch.nn.ModuleList([torch.nn.Linear(n, WIDTH), torch.nn.Linear(WIDTH, WIDTH),
-                                           torch.nn.Linear(WIDTH, self.m)]).double()
+                                           torch.nn.Linear(WIDTH, self.m)]).to(dtype)
         self.low = torch.tril_indices(n, n, -1)
 
     def trunk(self, q):
@@ -100,10 +101,11 @@ def epoch(model, opt, data, gen):
     return loss.item()
 
 
-def time_epochs(threads, data, repeats):
+def time_epochs(threads, data, repeats, dtype):
     torch.set_num_threads(threads)
     torch.manual_seed(0)
-    model = Delan(2)
+    data = [x.to(dtype) for x in data]
+    model = Delan(2, dtype)
     opt = torch.optim.Adam(model.parameters(), lr=5e-4, weight_decay=1e-5, amsgrad=True)
     gen = torch.Generator().manual_seed(1)
     return time_it(lambda: epoch(model, opt, data, gen), repeats)
@@ -121,13 +123,14 @@ def main():
     data = read_characters(args.data)
     samples = data[0].shape[0]
     result = {"samples": samples, "blas": blas, "torch": torch.__version__}
-    for threads in (1, 2):
-        wall, cpu = time_epochs(threads, data, args.repeats)
-        result[f"epoch_seconds_{threads}"] = wall
-        result[f"epoch_cpu_seconds_{threads}"] = cpu
-        print(f"DeLaN epoch ({samples} samples, batch {BATCH}, float64), {threads} thread(s): "
-              f"median {wall * 1e3:.1f} ms wall, {cpu * 1e3:.1f} ms CPU, "
-              f"{wall / samples * 1e6:.2f} us per sample")
+    for dtype, suffix in ((torch.float64, ""), (torch.float32, "_f32")):
+        for threads in (1, 2):
+            wall, cpu = time_epochs(threads, data, args.repeats, dtype)
+            result[f"epoch_seconds{suffix}_{threads}"] = wall
+            result[f"epoch_cpu_seconds{suffix}_{threads}"] = cpu
+            print(f"DeLaN epoch ({samples} samples, batch {BATCH}, {dtype}), {threads} thread(s): "
+                  f"median {wall * 1e3:.1f} ms wall, {cpu * 1e3:.1f} ms CPU, "
+                  f"{wall / samples * 1e6:.2f} us per sample")
     with open(args.out, "w") as f:
         json.dump(result, f)
     ours_path = os.path.join(os.path.dirname(os.path.abspath(args.out)), "delan_training.json")
@@ -136,14 +139,15 @@ def main():
 
 
 def report(benchmarks, torch_result):
-    """Ours (delan_training.json of the same run) next to PyTorch's best thread count."""
-    best = min(torch_result["epoch_seconds_1"], torch_result["epoch_seconds_2"])
-    for b in benchmarks:
-        if b.get("run_type") == "aggregate" or not b["name"].startswith("BM_DelanEpoch/"):
-            continue
-        ours = b["epoch_s"]
-        print(f"{b['name']}: ours {ours * 1e3:.2f} ms per epoch; PyTorch (best of 1, 2 threads) "
-              f"{best * 1e3:.2f} ms; PyTorch / ours = {best / ours:.1f}x")
+    """Ours (delan_training.json of the same run) next to PyTorch's best thread count, same precision."""
+    for row, suffix in (("BM_DelanEpoch/", ""), ("BM_DelanEpochF32/", "_f32")):
+        best = min(torch_result[f"epoch_seconds{suffix}_1"], torch_result[f"epoch_seconds{suffix}_2"])
+        for b in benchmarks:
+            if b.get("run_type") == "aggregate" or not b["name"].startswith(row):
+                continue
+            ours = b["epoch_s"]
+            print(f"{b['name']}: ours {ours * 1e3:.2f} ms per epoch; PyTorch (best of 1, 2 threads) "
+                  f"{best * 1e3:.2f} ms; ours / PyTorch = {ours / best:.2f}x")
 
 
 if __name__ == "__main__":

@@ -134,8 +134,8 @@ void RegisterTrainCommand(CLI::App& app) {
       ->check(Bounded(0, 256));
   command
       ->add_option("--precision", o->request.precision,
-                   "f64 or f32: the precision of the network and solver passes (abs-nn, res-nn, "
-                   "abs-node, res-node; parameters, Adam and loss sums stay double)")
+                   "f64 or f32: the precision of the network and solver passes (every model; "
+                   "parameters, Adam and loss sums stay double)")
       ->capture_default_str();
   command->add_option("--patience", o->request.patience,
                       "Stop when the validation loss has not improved for this many epochs (0: never)")

@@ -191,11 +191,13 @@ double NativePredictSeconds(const PyModel& m, const py::handle& x_in, const py::
   return seconds[static_cast<std::size_t>(repeats / 2)];
 }
 
-std::shared_ptr<PyModel> Load(const std::string& spec, double dt, const std::string& solver, int substeps) {
+std::shared_ptr<PyModel> Load(const std::string& spec, double dt, const std::string& solver, int substeps,
+                              const std::string& precision) {
   LoadModelOptions options;
   options.dt = dt;
   options.method = ParseMethod(solver, "solver");
   options.substeps = substeps;
+  if (!precision.empty()) options.precision = ParsePrecision(precision, "precision");
   DIFFDYN_CHECK(substeps >= 1, "substeps must be >= 1, got ", substeps);
   return std::make_shared<PyModel>(spec, LoadTransitionModel(spec, options));
 }
@@ -232,10 +234,13 @@ or the ODE-engine pusher ("oracle"). Made by diffdyn.load_model.)doc")
       .def_property_readonly("state_names", [](const PyModel& p) { return p.model().description().state_names; })
       .def_property_readonly("action_names", [](const PyModel& p) { return p.model().description().action_names; })
       .def_property_readonly("differentiable", [](const PyModel& p) { return p.model().differentiable(); })
+      .def_property_readonly("precision", [](const PyModel& p) { return PrecisionName(p.model().precision()); },
+                             "\"f32\" or \"f64\": what predict and rollout compute in.")
       .def("predict", &Predict, py::arg("x"), py::arg("u"), py::arg("dt") = py::none(), py::arg("threads") = 0,
            R"doc(Next states F(x, u): x (N, n), u (N, m) -> (N, n); one sample x (n,), u (m,) -> (n,).
 dt: seconds per transition, (N,) or one number, for continuous-time models (others ignore it).
-float64 C-contiguous inputs are read in place; float32 in gives float32 out (computed in float64).)doc")
+float64 C-contiguous inputs are read in place; float32 in gives float32 out. The model computes in its
+own precision (Model.precision, set by load_model's precision).)doc")
       .def("jacobian", &Jacobian, py::arg("x"), py::arg("u"), py::arg("threads") = 0,
            R"doc([dF/dx, dF/du] per sample, exact (forward-mode Jets): (N, n, n + m), or (n, n + m) for one sample.)doc")
       .def("rollout", &Rollout, py::arg("x0"), py::arg("actions"), py::arg("threads") = 0,
@@ -248,10 +253,11 @@ float64 C-contiguous inputs are read in place; float32 in gives float32 out (com
   m.def("_native_predict_seconds", &NativePredictSeconds, py::arg("model"), py::arg("x"), py::arg("u"),
         py::arg("repeats"), "Median seconds of the same predict in C++ (one thread), for benchmarks.");
   m.def("load_model", &Load, py::arg("spec"), py::arg("dt") = 0.0, py::arg("solver") = "rk4-classic",
-        py::arg("substeps") = 4,
+        py::arg("substeps") = 4, py::arg("precision") = "",
         R"doc(The model `spec` names: a model file (learned, extended-physics, delan), an analytic model
 name (pendulum, cartpole, double-pendulum, arm2, panda) or "oracle". Continuous-time models
-need dt (seconds per transition) and integrate with `solver` in `substeps` steps.)doc");
+need dt (seconds per transition) and integrate with `solver` in `substeps` steps. precision:
+"f32" or "f64" converts a learned model (as the commands' --precision); "" keeps the file's own.)doc");
 }
 
 }  // namespace diffdyn::python

@@ -28,9 +28,9 @@ namespace {
 
 // The `eval --json` summary as a dict (through JSON text, so numbers are the same bits).
 py::object Evaluate(const py::handle& model, const std::string& data, const std::string& solver, int steps,
-                    int substeps, int threads) {
+                    int substeps, int threads, const std::string& precision) {
   EvalRequest request{.model = ModelSpec(model), .data = data, .solver = solver, .steps = steps,
-                      .substeps = substeps, .threads = threads};
+                      .substeps = substeps, .threads = threads, .precision = precision};
   std::string text;
   {
     py::gil_scoped_release release;
@@ -79,6 +79,7 @@ const std::map<std::string, Setter>& TrainSetters() {
       {"patience", [](TrainRequest& r, const py::handle& v) { r.patience = v.cast<int>(); }},
       {"normalize", [](TrainRequest& r, const py::handle& v) { r.normalize = v.cast<std::string>(); }},
       {"seed", [](TrainRequest& r, const py::handle& v) { r.seed = v.cast<std::uint64_t>(); }},
+      {"precision", [](TrainRequest& r, const py::handle& v) { r.precision = v.cast<std::string>(); }},
       {"progress", [](TrainRequest& r, const py::handle& v) { r.progress = v.cast<bool>(); }},
       {"epochs", [](TrainRequest& r, const py::handle& v) { r.epochs = v.cast<int>(); }},
       {"batch", [](TrainRequest& r, const py::handle& v) { r.batch = v.cast<int>(); }},
@@ -162,15 +163,16 @@ PYBIND11_MODULE(_diffdyn, m) {
   BindDelan(m);
   BindMppi(m);
   m.def("evaluate", &Evaluate, py::arg("model"), py::arg("data"), py::arg("solver") = "", py::arg("steps") = 0,
-        py::arg("substeps") = 4, py::arg("threads") = 0,
+        py::arg("substeps") = 4, py::arg("threads") = 0, py::arg("precision") = "",
         R"doc(The dictionary `diffdyn eval --model MODEL --data DATA --json` prints, from the same
 computation: MODEL is a path or name, or a diffdyn.Model (its spec is evaluated; continuous-time
-models take the data's median interval). solver / steps / substeps as the command's options.)doc");
+models take the data's median interval). solver / steps / substeps / precision as the command's
+options (precision "": the model file's own).)doc");
   m.def("train", &Train, py::arg("data"), py::arg("model") = "abs-nn", py::arg("out") = "model.json",
         R"doc(Trains a model on the dataset file `data`, writes it to `out` and returns the dictionary
 `diffdyn train --json` prints, from the same function. Keyword options are the command's, in
 snake case: solver, steps, hidden, loss, epochs, lr, batch, val_fraction, gamma, threads,
-patience, normalize, seed, mass_epsilon, diagonal_floor, actuated ("auto", "all" or a list of
+patience, normalize, seed, precision ("f32" or "f64"), mass_epsilon, diagonal_floor, actuated ("auto", "all" or a list of
 1-based joints), prismatic (a list), angle_features ("sincos" or "raw"), progress (a bar on stderr).)doc");
   const diffdyn::DiagnosisOptions d;
   m.def("_diagnose", &Diagnose, py::arg("model"), py::arg("measured"), py::arg("out"),

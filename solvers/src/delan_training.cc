@@ -143,8 +143,7 @@ TrainResult TrainDelan(Delan* model, const DelanSamples& train, const DelanSampl
   DIFFDYN_CHECK(train.measured_torque, train.path, ": no measured torques (free motion); DeLaN learns from torques");
   const int n = model->dof();
   const int batch = std::min(options.batch_size, train.size());
-  DelanWorkspace ws, val_ws;
-  ws.mlp = MlpWorkspace(model->network().architecture(), batch, options.chunk_size, true);
+  DelanWorkspace ws(model->network().architecture(), batch, options.chunk_size, model->precision()), val_ws;
   Eigen::MatrixXd q(n, batch), qd(n, batch), qdd(n, batch), tau(n, batch);
   // FitMinibatches updates theta; each loss evaluation first hands it to the model.
   Eigen::VectorXd theta = model->parameters();

@@ -80,7 +80,8 @@ void AddDelanRollouts(const EvalRequest& r, bool test_characters_only, std::map<
 }
 
 nlohmann::json EvaluateDelan(const EvalRequest& r) {
-  const Delan model = LoadDelan(r.model);
+  Delan model = LoadDelan(r.model);
+  if (!r.precision.empty()) model.SetPrecision(ParsePrecision(r.precision));
   const Dataset data = ReadDataset(r.data);
   const int dof = JointCount(data);
   DIFFDYN_CHECK(dof == model.dof(), "--data ", r.data, ": ", dof, " joints, the DeLaN in ", r.model, " has ",
@@ -101,7 +102,7 @@ nlohmann::json EvaluateDelan(const EvalRequest& r) {
       throw NumericalError(StrCat("--model ", r.model, ": ", key, " on ", r.data, " is not finite"));
     }
   }
-  nlohmann::json summary = {{"model", model.options().kind()}};
+  nlohmann::json summary = {{"model", model.options().kind()}, {"precision", PrecisionName(model.precision())}};
   for (const auto& [key, value] : scores) summary[key] = value;
   summary["n_samples"] = test.size();
   summary["test_characters_only"] = characters;

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 
 #include "run_diffdyn.h"
 
@@ -88,6 +89,43 @@ TEST(Precision, BytesDoNotDependOnTheThreadCount) {
                    jb = nlohmann::json::parse(ReadAll(two));
     EXPECT_EQ(ja["parameters"], jb["parameters"]) << precision;
   }
+}
+
+// DeLaN in float32: the losses follow float64 to float32's rounding, the file records
+// the precision, the bytes do not depend on the thread count, and eval converts.
+TEST(Precision, DelanTrainsInFloat32AtAnyThreadCount) {
+  const std::string csv = TempPath("precision_arm2.csv");
+  ASSERT_EQ(RunDiffdyn("collect --system arm2 --trajectories 4 --seconds 2 --seed 3 --quiet --out " + csv).exit_code,
+            0);
+  const auto train = [&](const std::string& precision, int threads) {
+    const std::string out = TempPath("precision_delan_" + precision + "_" + std::to_string(threads) + ".json");
+    const nlohmann::json summary =
+        SummaryJson(RunDiffdyn("train --data " + csv + " --model delan-friction --hidden 16 --epochs 5 --seed 1" +
+                               " --precision " + precision + " --threads " + std::to_string(threads) +
+                               " --quiet --json --out " + out));
+    return std::make_pair(summary, nlohmann::json::parse(ReadAll(out)));
+  };
+  const auto [a, file_a] = train("f64", 1);
+  const auto [b, file_b] = train("f32", 1);
+  const auto [c, file_c] = train("f32", 2);
+  EXPECT_EQ(b["precision"], "f32");
+  EXPECT_EQ(file_b["precision"], "f32");
+  EXPECT_EQ(file_a["precision"], "f64");
+  for (const char* key : {"final_train_loss", "final_val_loss"}) {
+    const double x = a[key].get<double>(), y = b[key].get<double>();
+    EXPECT_NEAR(y, x, 1e-4 * x) << key;
+    EXPECT_NE(y, x) << key << ": the float32 run computed in float64";
+  }
+  EXPECT_EQ(b["final_val_loss"], c["final_val_loss"]);
+  EXPECT_EQ(file_b["parameters"], file_c["parameters"]);
+  const std::string model = TempPath("precision_delan_f32_1.json");
+  const nlohmann::json own = SummaryJson(RunDiffdyn("eval --model " + model + " --data " + csv + " --json"));
+  const nlohmann::json as_f64 =
+      SummaryJson(RunDiffdyn("eval --model " + model + " --data " + csv + " --precision f64 --json"));
+  EXPECT_EQ(own["precision"], "f32");
+  EXPECT_EQ(as_f64["precision"], "f64");
+  EXPECT_NEAR(own["torque_mse"].get<double>(), as_f64["torque_mse"].get<double>(),
+              1e-4 * as_f64["torque_mse"].get<double>());
 }
 
 TEST(Precision, WithoutAFloat32PathIsAOneLineError) {

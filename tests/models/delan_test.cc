@@ -4,6 +4,7 @@
 #include "diffdyn/models/delan.h"
 
 #include <filesystem>
+#include <limits>
 #include <numbers>
 
 #include <ceres/jet.h>
@@ -154,6 +155,11 @@ TEST(Delan, FrictionModelFileRoundTrips) {
   q << 0.3, -1.0;
   qd << -1.0, 2.0;
   EXPECT_TRUE(back.InverseDynamics(q, qd, qd) == model.InverseDynamics(q, qd, qd));
+  EXPECT_EQ(back.precision(), Precision::kF64);
+  Delan single = model;
+  single.SetPrecision(Precision::kF32);
+  SaveDelan(path, single);
+  EXPECT_EQ(LoadDelan(path).precision(), Precision::kF32);
   nlohmann::json arch = DelanArchitectureToJson(model.options());
   arch["periodic"] = nlohmann::json::array();
   EXPECT_THROW(DelanArchitectureFromJson(arch, true), Error);  // mlp has 3 inputs, not 2
@@ -250,17 +256,53 @@ TEST(Delan, TorqueLossGradientMatchesFiniteDifferences) {
   }
 }
 
-TEST(Delan, LossIsTheSameAtAnyThreadCount) {
-  const Delan model = RandomDelan(SmallOptions(2, {1}, true), 10);
+TEST(Delan, LossIsTheSameAtAnyThreadCountInEachPrecision) {
+  Delan model = RandomDelan(SmallOptions(2, {1}, true), 10);
   const Batch d = RandomBatch(2, 300, 11);
-  DelanWorkspace one, two;
-  one.mlp = MlpWorkspace(model.network().architecture(), 300, 64, true);
-  two.mlp = MlpWorkspace(model.network().architecture(), 300, 64, true);
-  Eigen::VectorXd g1, g2;
-  const double l1 = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, &g1, &one, 1);
-  const double l2 = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, &g2, &two, 2);
-  EXPECT_EQ(l1, l2);
-  EXPECT_TRUE(g1 == g2);
+  for (const Precision precision : {Precision::kF64, Precision::kF32}) {
+    model.SetPrecision(precision);
+    DelanWorkspace one(model.network().architecture(), 300, 64, precision);
+    DelanWorkspace two(model.network().architecture(), 300, 64, precision);
+    Eigen::VectorXd g1, g2;
+    const double l1 = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, &g1, &one, 1);
+    const double l2 = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, &g2, &two, 2);
+    EXPECT_EQ(l1, l2) << PrecisionName(precision);
+    EXPECT_TRUE(g1 == g2) << PrecisionName(precision);
+    const DelanParts p1 = model.Decompose(d.q, d.qd, d.qdd, &one, 1);
+    const DelanParts p2 = model.Decompose(d.q, d.qd, d.qdd, &two, 2);
+    EXPECT_TRUE(p1.torque == p2.torque && p1.power == p2.power) << PrecisionName(precision);
+  }
+}
+
+// The float32 batched paths follow float64 on the same parameters: loss,
+// gradient and parts agree to a tolerance set by float's epsilon (not bits).
+TEST(Delan, Float32FollowsFloat64) {
+  for (const DelanOptions& options : Variants(2)) {
+    Delan model = RandomDelan(options, 13);
+    const Batch d = RandomBatch(2, 200, 14);
+    DelanWorkspace ws;
+    Eigen::VectorXd g64, g32;
+    const double l64 = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, &g64, &ws, 2);
+    const DelanParts p64 = model.Decompose(d.q, d.qd, d.qdd, &ws, 2);
+    model.SetPrecision(Precision::kF32);
+    EXPECT_EQ(model.precision(), Precision::kF32);
+    const double l32 = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, &g32, &ws, 2);
+    const DelanParts p32 = model.Decompose(d.q, d.qd, d.qdd, &ws, 2);
+    const double eps = std::numeric_limits<float>::epsilon();
+    EXPECT_NE(l32, l64);  // really computed in float
+    EXPECT_NEAR(l32, l64, 200 * eps * l64);
+    EXPECT_LT((g32 - g64).norm(), 500 * eps * g64.norm());
+    EXPECT_LT((p32.torque - p64.torque).norm(), 200 * eps * p64.torque.norm());
+    EXPECT_LT((p32.min_mass_eigenvalue - p64.min_mass_eigenvalue).norm(),
+              200 * eps * p64.min_mass_eigenvalue.norm());
+    // A parameter change reaches the float network.
+    Eigen::VectorXd theta = model.parameters();
+    theta *= 1.01;
+    model.SetParameters(theta);
+    const double moved = model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, nullptr, &ws, 2);
+    model.SetPrecision(Precision::kF64);
+    EXPECT_NEAR(moved, model.TorqueLoss(d.q, d.qd, d.qdd, d.tau, nullptr, &ws, 2), 200 * eps * moved);
+  }
 }
 
 TEST(Delan, RefusesBadSizes) {

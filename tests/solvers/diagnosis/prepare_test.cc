@@ -1,7 +1,10 @@
 // Diagnosis stage 1: noise estimates and the cutoff rule.
 #include "diffdyn/solvers/diagnosis/prepare.h"
 
+#include <algorithm>
 #include <cmath>
+#include <string>
+#include <vector>
 #include <numbers>
 #include <random>
 
@@ -62,6 +65,34 @@ TEST(EstimateWhiteNoise, RecoversTheSigmaOfMovingAndHeldSignals) {
 TEST(EstimateWhiteNoise, IsZeroForALinearSignal) {
   const Signals d = Record(10.0, 1e-2, 0.0, 0.0, 1, [](double t) { return 2.0 * t - 1.0; });
   EXPECT_LT(EstimateWhiteNoise(d.t, d.tau, {0})[0], 1e-9);
+}
+
+// The real Panda log repeats its exciting trajectory every 2 pi / (0.15 pi) =
+// 13.33 s (gen_params.txt), so tau(t + P) - tau(t) holds twice the torque
+// sensor's scatter plus whatever does not repeat. The neighbour-line estimate
+// of each joint's noise must be of that size (robust spread of the differences
+// over sqrt(2)): measured 0.59-1.17 of it.
+TEST(EstimateWhiteNoise, RealPandaNoiseIsTheScatterBetweenRepeats) {
+  const Dataset d = ReadDataset(std::string(DIFFDYN_SHARED_DATA_DIR) + "/panda_gaz2019_traj1");
+  const Trajectory& run = d.trajectories.at(0);
+  const Eigen::VectorXd sigma = EstimateWhiteNoise(run.t, run.actions, {0});
+  const double period = 2.0 / 0.15;
+  for (int j = 0; j < 7; ++j) {
+    std::vector<double> diff;
+    for (Eigen::Index k = 0, m = 0; k < run.t.size() && run.t[k] + period <= run.t[run.t.size() - 1]; ++k) {
+      while (run.t[m + 1] < run.t[k] + period) ++m;  // run.t[m] < t + P <= run.t[m + 1]
+      const double w = (run.t[k] + period - run.t[m]) / (run.t[m + 1] - run.t[m]);
+      diff.push_back((1 - w) * run.actions(j, m) + w * run.actions(j, m + 1) - run.actions(j, k));
+    }
+    const auto mid = diff.begin() + static_cast<std::ptrdiff_t>(diff.size() / 2);
+    std::nth_element(diff.begin(), mid, diff.end());
+    const double median = *mid;
+    for (double& v : diff) v = std::abs(v - median);
+    std::nth_element(diff.begin(), mid, diff.end());
+    const double scatter = 1.4826 * *mid / std::sqrt(2.0);
+    EXPECT_GT(sigma[j], 0.5 * scatter) << "joint " << j + 1 << " scatter " << scatter;
+    EXPECT_LT(sigma[j], 1.5 * scatter) << "joint " << j + 1 << " scatter " << scatter;
+  }
 }
 
 // A qd that is the backward difference of q is found and moved half a sample

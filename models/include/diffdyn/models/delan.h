@@ -34,6 +34,11 @@
 // activations, mlp.h). The single-sample paths are templated on the scalar (double
 // or ceres::Jet), so a DeLaN can be linearised or integrated with Jets.
 //
+// Precision: SetPrecision(Precision::kF32) runs the batched paths (TorqueLoss,
+// Decompose) on a float copy of the network (sgemm, float heads); the loss, the
+// chunk sums, the friction head and the parameters stay double, and results are
+// the same at any thread count in either precision.
+//
 //   Delan model = Delan::Initialized({.dof = 2}, /*seed=*/0);
 //   Delan cartpole = Delan::Initialized({.dof = 2, .periodic = {1}, .friction = true}, 0);
 //   DelanWorkspace ws;
@@ -63,6 +68,7 @@
 #include "diffdyn/models/mlp.h"
 #include "diffdyn/models/model_file.h"
 #include "diffdyn/models/parallel.h"
+#include "diffdyn/models/precision.h"
 
 namespace diffdyn {
 
@@ -250,15 +256,34 @@ class DelanHead {
   S potential_{};
 };
 
-/// Buffers of the batched DeLaN paths (one per concurrent caller).
+/// Buffers of the batched DeLaN paths in one precision S (double or float).
+template <typename S>
+struct DelanBuffers {
+  using Mat = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
+  BasicMlpWorkspace<S> mlp;
+  Mat z, y, jac, ybar, jbar;                 // network inputs, outputs, dy/dz and cotangents
+  Eigen::Matrix<S, Eigen::Dynamic, 1> net_grad;
+  std::vector<DelanHead<S>> heads;           // one per chunk
+  std::vector<Mat> jq, jq_bar;               // dy/dq and dL/d(dy/dq) of one sample, per chunk
+};
+
+/// Buffers of the batched DeLaN paths (one per concurrent caller), for either precision.
 struct DelanWorkspace {
-  MlpWorkspace mlp;
-  Eigen::MatrixXd z, y, jac, ybar, jbar;     // network inputs, outputs, dy/dz and cotangents
-  Eigen::VectorXd net_grad;
-  std::vector<DelanHead<double>> heads;      // one per chunk
-  std::vector<Eigen::MatrixXd> jq, jq_bar;   // dy/dq and dL/d(dy/dq) of one sample, per chunk
-  std::vector<Eigen::VectorXd> friction_grad;  // per chunk (2n)
-  std::vector<double> chunk_loss;
+  DelanWorkspace() = default;
+  /// Buffers for batches of up to `max_batch` samples in chunks of `chunk_size`
+  /// (the chunks fix the summation order) for a network `arch` in `precision`.
+  DelanWorkspace(const MlpArchitecture& arch, int max_batch, int chunk_size, Precision precision) {
+    if (precision == Precision::kF32) {
+      f32.mlp = MlpWorkspaceF(arch, max_batch, chunk_size, true);
+    } else {
+      f64.mlp = MlpWorkspace(arch, max_batch, chunk_size, true);
+    }
+  }
+
+  DelanBuffers<double> f64;
+  DelanBuffers<float> f32;
+  std::vector<Eigen::VectorXd> friction_grad;  // per chunk (2n), summed in double
+  std::vector<double> chunk_loss;              // per chunk, summed in double
 };
 
 /// The DeLaN parts of a batch (n x B each, energies 1 x B).
@@ -299,6 +324,17 @@ class Delan {
     friction_ = theta.tail(options.num_friction_parameters());
   }
 
+  /// The precision of the batched paths (TorqueLoss, Decompose): float64, or
+  /// float32 on a float copy of the network with the loss, the gradient's sum
+  /// over chunks and the friction head in double. Parameters stay double; the
+  /// single-sample paths compute in their own scalar.
+  Precision precision() const { return precision_; }
+  /// Sets the precision of the batched paths.
+  void SetPrecision(Precision p) {
+    precision_ = p;
+    SyncFloatNetwork();
+  }
+
   const DelanOptions& options() const { return options_; }
   int dof() const { return options_.dof; }
   const Mlp<double>& network() const { return net_; }
@@ -315,6 +351,7 @@ class Delan {
                   theta.size());
     net_.mutable_parameters() = theta.head(net_.num_parameters());
     friction_ = theta.tail(friction_.size());
+    SyncFloatNetwork();
   }
 
   /// Viscous and Coulomb coefficients softplus(w) (n each; zeros without friction head).
@@ -381,57 +418,9 @@ class Delan {
     DIFFDYN_CHECK(tau.rows() == dof() && tau.cols() == batch, "DeLaN: tau must be ", dof(), " x ", batch);
     DIFFDYN_CHECK(joint_weights.size() == 0 || joint_weights.size() == dof(), "DeLaN: ", dof(),
                   " joint weights expected, got ", joint_weights.size());
-    const bool weighted = joint_weights.size() > 0;
-    const InputFeatures features = options_.features();
-    features.Encode(q, &ws->z);
-    net_.Forward(ws->z, &ws->y, &ws->jac, &ws->mlp, threads);
-    const int n = dof(), nz = static_cast<int>(ws->z.rows()), chunk = ws->mlp.chunk_size();
-    const int chunks = NumChunks(batch, chunk);
-    PrepareHeads(ws, chunks);
-    if (grad) {
-      ws->ybar.resize(ws->y.rows(), batch);
-      ws->jbar.resize(ws->jac.rows(), ws->jac.cols());
-    }
-    const double scale = 1.0 / batch;
-    ParallelForChunks(batch, chunk, threads, [&](int c, int begin, int end) {
-      DelanHead<double>& head = ws->heads[c];
-      Eigen::MatrixXd& jq = ws->jq[c];
-      Eigen::MatrixXd& jq_bar = ws->jq_bar[c];
-      Eigen::VectorXd& fgrad = ws->friction_grad[c];
-      Eigen::VectorXd tau_hat(n), tbar(n);
-      double sum = 0.0;
-      for (int b = begin; b < end; ++b) {
-        features.ChainJacobian<double>(q.col(b), ws->jac.middleCols(Eigen::Index(b) * nz, nz), &jq);
-        head.Forward(ws->y.col(b), jq, qd.col(b), qdd.col(b));
-        head.Torque(tau_hat);
-        AddFriction(qd.col(b), &tau_hat);
-        tbar = tau_hat - tau.col(b);
-        if (weighted) {
-          sum += tbar.dot(joint_weights.cwiseProduct(tbar));
-          tbar = tbar.cwiseProduct(joint_weights);
-        } else {
-          sum += tbar.squaredNorm();
-        }
-        if (!grad) continue;
-        tbar *= 2.0 * scale;
-        head.Backward(tbar, ws->y.col(b), jq, ws->ybar.col(b), jq_bar);
-        auto jbar_b = ws->jbar.middleCols(Eigen::Index(b) * nz, nz);
-        features.ChainJacobianTranspose(q.col(b), jq_bar, &jbar_b);
-        AddFrictionGradient(qd.col(b), tbar, &fgrad);
-      }
-      ws->chunk_loss[c] = sum;
-    });
-    double loss = 0.0;
-    for (int c = 0; c < chunks; ++c) loss += ws->chunk_loss[c];
-    if (grad) {
-      net_.Backward(ws->ybar, ws->jbar, &ws->net_grad, nullptr, &ws->mlp, threads);
-      grad->resize(num_parameters());
-      grad->head(net_.num_parameters()) = ws->net_grad;
-      auto tail = grad->tail(friction_.size());
-      tail.setZero();
-      for (int c = 0; c < chunks; ++c) tail += ws->friction_grad[c];
-    }
-    return loss * scale;
+    const Batch in{q, qd, qdd, tau, joint_weights};
+    if (precision_ == Precision::kF32) return TorqueLossIn(net_f_, in, grad, &ws->f32, ws, threads);
+    return TorqueLossIn(net_, in, grad, &ws->f64, ws, threads);
   }
 
   /// tau^ and its parts for the batch (q, qd, qdd: n x B), with the energies, the
@@ -439,40 +428,117 @@ class Delan {
   /// eigenvalue of H per sample.
   DelanParts Decompose(const Eigen::MatrixXd& q, const Eigen::MatrixXd& qd, const Eigen::MatrixXd& qdd,
                        DelanWorkspace* ws, int threads = 0) const {
-    const int batch = static_cast<int>(q.cols()), n = dof();
-    CheckBatch(q, qd, qdd, batch);
+    CheckBatch(q, qd, qdd, static_cast<int>(q.cols()));
+    if (precision_ == Precision::kF32) return DecomposeIn(net_f_, q, qd, qdd, &ws->f32, threads);
+    return DecomposeIn(net_, q, qd, qdd, &ws->f64, threads);
+  }
+
+ private:
+  // The training batch of TorqueLoss (n x B each; weights n or empty).
+  struct Batch {
+    const Eigen::MatrixXd &q, &qd, &qdd, &tau;
+    const Eigen::VectorXd& joint_weights;
+  };
+
+  // TorqueLoss on the network `net` of precision S with its buffers `buf`; the
+  // loss and the friction gradient are summed in double, chunk by chunk.
+  template <typename S>
+  double TorqueLossIn(const Mlp<S>& net, const Batch& in, Eigen::VectorXd* grad, DelanBuffers<S>* buf,
+                      DelanWorkspace* ws, int threads) const {
+    using Vec = Eigen::Matrix<S, Eigen::Dynamic, 1>;
+    const int batch = static_cast<int>(in.q.cols());
+    const bool weighted = in.joint_weights.size() > 0;
     const InputFeatures features = options_.features();
-    features.Encode(q, &ws->z);
-    net_.Forward(ws->z, &ws->y, &ws->jac, &ws->mlp, threads);
-    const int nz = static_cast<int>(ws->z.rows()), chunk = ws->mlp.chunk_size();
+    features.Encode(in.q, &buf->z);
+    net.Forward(buf->z, &buf->y, &buf->jac, &buf->mlp, threads);
+    const int n = dof(), nz = static_cast<int>(buf->z.rows()), chunk = buf->mlp.chunk_size();
     const int chunks = NumChunks(batch, chunk);
-    PrepareHeads(ws, chunks);
+    PrepareHeads(buf, ws, chunks);
+    if (grad) {
+      buf->ybar.resize(buf->y.rows(), batch);
+      buf->jbar.resize(buf->jac.rows(), buf->jac.cols());
+    }
+    const double scale = 1.0 / batch;
+    ParallelForChunks(batch, chunk, threads, [&](int c, int begin, int end) {
+      DelanHead<S>& head = buf->heads[c];
+      auto& jq = buf->jq[c];
+      auto& jq_bar = buf->jq_bar[c];
+      Vec tau_hat(n), tbar(n);
+      double sum = 0.0;
+      for (int b = begin; b < end; ++b) {
+        features.ChainJacobian<S>(in.q.col(b), buf->jac.middleCols(Eigen::Index(b) * nz, nz), &jq);
+        head.Forward(buf->y.col(b), jq, in.qd.col(b), in.qdd.col(b));
+        head.Torque(tau_hat);
+        AddFriction(in.qd.col(b), &tau_hat);
+        tbar = tau_hat - in.tau.col(b).template cast<S>();
+        for (int j = 0; j < n; ++j) {
+          const double r = static_cast<double>(tbar[j]), w = weighted ? in.joint_weights[j] : 1.0;
+          sum += w * r * r;
+          if (weighted) tbar[j] *= S(w);
+        }
+        if (!grad) continue;
+        tbar *= S(2.0 * scale);
+        head.Backward(tbar, buf->y.col(b), jq, buf->ybar.col(b), jq_bar);
+        auto jbar_b = buf->jbar.middleCols(Eigen::Index(b) * nz, nz);
+        features.ChainJacobianTranspose(in.q.col(b), jq_bar, &jbar_b);
+        AddFrictionGradient(in.qd.col(b), tbar, &ws->friction_grad[c]);
+      }
+      ws->chunk_loss[c] = sum;
+    });
+    double loss = 0.0;
+    for (int c = 0; c < chunks; ++c) loss += ws->chunk_loss[c];
+    if (grad) {
+      net.Backward(buf->ybar, buf->jbar, &buf->net_grad, nullptr, &buf->mlp, threads);
+      grad->resize(num_parameters());
+      grad->head(net_.num_parameters()) = buf->net_grad.template cast<double>();
+      auto tail = grad->tail(friction_.size());
+      tail.setZero();
+      for (int c = 0; c < chunks; ++c) tail += ws->friction_grad[c];
+    }
+    return loss * scale;
+  }
+
+  // Decompose on the network `net` of precision S (parts returned in double).
+  template <typename S>
+  DelanParts DecomposeIn(const Mlp<S>& net, const Eigen::MatrixXd& q, const Eigen::MatrixXd& qd,
+                         const Eigen::MatrixXd& qdd, DelanBuffers<S>* buf, int threads) const {
+    const int batch = static_cast<int>(q.cols()), n = dof();
+    const InputFeatures features = options_.features();
+    features.Encode(q, &buf->z);
+    net.Forward(buf->z, &buf->y, &buf->jac, &buf->mlp, threads);
+    const int nz = static_cast<int>(buf->z.rows()), chunk = buf->mlp.chunk_size();
+    DelanWorkspace unused;
+    PrepareHeads(buf, &unused, NumChunks(batch, chunk));
     DelanParts p;
     for (Eigen::MatrixXd* m : {&p.torque, &p.inertial, &p.coriolis, &p.gravity, &p.friction}) m->resize(n, batch);
     for (Eigen::RowVectorXd* r : {&p.kinetic, &p.potential, &p.power, &p.min_mass_eigenvalue}) r->resize(batch);
     ParallelForChunks(batch, chunk, threads, [&](int c, int begin, int end) {
-      DelanHead<double>& head = ws->heads[c];
+      DelanHead<S>& head = buf->heads[c];
+      Eigen::Matrix<S, Eigen::Dynamic, 1> tau_hat(n);
       for (int b = begin; b < end; ++b) {
-        features.ChainJacobian<double>(q.col(b), ws->jac.middleCols(Eigen::Index(b) * nz, nz), &ws->jq[c]);
-        head.Forward(ws->y.col(b), ws->jq[c], qd.col(b), qdd.col(b));
+        features.ChainJacobian<S>(q.col(b), buf->jac.middleCols(Eigen::Index(b) * nz, nz), &buf->jq[c]);
+        head.Forward(buf->y.col(b), buf->jq[c], qd.col(b), qdd.col(b));
+        head.Torque(tau_hat);
         p.friction.col(b) = Friction<double>(qd.col(b));
-        head.Torque(p.torque.col(b));
-        p.torque.col(b) += p.friction.col(b);
-        p.inertial.col(b) = head.inertial();
-        p.coriolis.col(b) = head.coriolis();
-        p.gravity.col(b) = head.gravity();
-        p.kinetic[b] = head.kinetic();
-        p.potential[b] = head.potential();
-        p.power[b] = head.power();
-        p.min_mass_eigenvalue[b] =
-            Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(head.MassMatrix(), Eigen::EigenvaluesOnly)
-                .eigenvalues()[0];
+        p.torque.col(b) = tau_hat.template cast<double>() + p.friction.col(b);
+        p.inertial.col(b) = head.inertial().template cast<double>();
+        p.coriolis.col(b) = head.coriolis().template cast<double>();
+        p.gravity.col(b) = head.gravity().template cast<double>();
+        p.kinetic[b] = static_cast<double>(head.kinetic());
+        p.potential[b] = static_cast<double>(head.potential());
+        p.power[b] = static_cast<double>(head.power());
+        p.min_mass_eigenvalue[b] = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(
+                                       head.MassMatrix().template cast<double>(), Eigen::EigenvaluesOnly)
+                                       .eigenvalues()[0];
       }
     });
     return p;
   }
 
- private:
+  // The float network follows the double parameters when the precision is float32.
+  void SyncFloatNetwork() {
+    if (precision_ == Precision::kF32) net_f_ = net_.cast<float>();
+  }
   // softplus(w) of the viscous (block 0) or Coulomb (block 1) raw parameters.
   Eigen::VectorXd FrictionCoefficients(int block) const {
     if (!options_.friction) return Eigen::VectorXd::Zero(dof());
@@ -488,20 +554,22 @@ class Delan {
     return S(ActivationValue(softplus, friction_[j])) * qd +
            S(ActivationValue(softplus, friction_[dof() + j])) * tanh(qd / S(options_.coulomb_velocity));
   }
-  // tau += f(qd).
-  template <typename V>
-  void AddFriction(const V& qd, Eigen::VectorXd* tau) const {
+  // tau += f(qd), f computed in double (tau of either precision).
+  template <typename V, typename T>
+  void AddFriction(const V& qd, T* tau) const {
+    using S = typename T::Scalar;
     if (!options_.friction) return;
-    for (int j = 0; j < dof(); ++j) (*tau)[j] += JointFriction(j, double(qd[j]));
+    for (int j = 0; j < dof(); ++j) (*tau)[j] += static_cast<S>(JointFriction(j, double(qd[j])));
   }
-  // dL/dw += tbar_j * softplus'(w) * (qd_j | tanh(qd_j / v_c)).
-  template <typename V>
-  void AddFrictionGradient(const V& qd, const Eigen::VectorXd& tbar, Eigen::VectorXd* grad) const {
+  // dL/dw += tbar_j * softplus'(w) * (qd_j | tanh(qd_j / v_c)), in double.
+  template <typename V, typename TB>
+  void AddFrictionGradient(const V& qd, const TB& tbar, Eigen::VectorXd* grad) const {
     if (!options_.friction) return;
     const int n = dof();
     for (int j = 0; j < n; ++j) {
-      (*grad)[j] += tbar[j] * ActivationDerivative(Activation::Softplus(), friction_[j]) * qd[j];
-      (*grad)[n + j] += tbar[j] * ActivationDerivative(Activation::Softplus(), friction_[n + j]) *
+      const double t = static_cast<double>(tbar[j]);
+      (*grad)[j] += t * ActivationDerivative(Activation::Softplus(), friction_[j]) * qd[j];
+      (*grad)[n + j] += t * ActivationDerivative(Activation::Softplus(), friction_[n + j]) *
                         std::tanh(qd[j] / options_.coulomb_velocity);
     }
   }
@@ -512,19 +580,21 @@ class Delan {
                   "DeLaN: q, qd, qdd must be ", dof(), " x B with one B, got ", q.rows(), " x ", q.cols(),
                   ", ", qd.rows(), " x ", qd.cols(), ", ", qdd.rows(), " x ", qdd.cols());
   }
-  void PrepareHeads(DelanWorkspace* ws, int chunks) const {
-    if (!ws->heads.empty() && ws->heads.front().dof() != dof()) {
-      ws->heads.clear();
-      ws->jq.clear();
-      ws->jq_bar.clear();
+  // Sizes the per-chunk heads and Jacobians of `buf` and the per-chunk sums of `ws`.
+  template <typename S>
+  void PrepareHeads(DelanBuffers<S>* buf, DelanWorkspace* ws, int chunks) const {
+    if (!buf->heads.empty() && buf->heads.front().dof() != dof()) {
+      buf->heads.clear();
+      buf->jq.clear();
+      buf->jq_bar.clear();
     }
-    while (static_cast<int>(ws->heads.size()) < chunks) ws->heads.emplace_back(options_);
+    while (static_cast<int>(buf->heads.size()) < chunks) buf->heads.emplace_back(options_);
     const int m = options_.num_outputs();
-    ws->jq.resize(chunks);
-    ws->jq_bar.resize(chunks);
+    buf->jq.resize(chunks);
+    buf->jq_bar.resize(chunks);
     for (int c = 0; c < chunks; ++c) {
-      ws->jq[c].resize(m, dof());  // no-op after the first call
-      ws->jq_bar[c].resize(m, dof());
+      buf->jq[c].resize(m, dof());  // no-op after the first call
+      buf->jq_bar[c].resize(m, dof());
     }
     ws->friction_grad.resize(chunks);
     for (Eigen::VectorXd& g : ws->friction_grad) g.setZero(options_.num_friction_parameters());
@@ -534,6 +604,8 @@ class Delan {
   DelanOptions options_;
   Mlp<double> net_;
   Eigen::VectorXd friction_;  // w_v (n), w_c (n), or empty
+  Precision precision_ = Precision::kF64;
+  Mlp<float> net_f_;          // net_ in float when precision_ is float32
 };
 
 /// A DeLaN as a continuous-time system for ContinuousTransitionModel
@@ -631,16 +703,17 @@ inline void RegisterDelanKind() {
 /// Whether `kind` is a DeLaN model-file kind.
 inline bool IsDelanKind(const std::string& kind) { return kind == "delan" || kind == "delan-friction"; }
 
-/// Saves `model` atomically as a model file of kind model.options().kind().
+/// Saves `model` atomically as a model file of kind model.options().kind(), with its precision.
 inline void SaveDelan(const std::filesystem::path& path, const Delan& model,
                       const nlohmann::json& provenance = nlohmann::json::object(),
                       const nlohmann::json& metrics = nlohmann::json::object()) {
   RegisterDelanKind();
   SaveModelFile(path, ModelFile{model.options().kind(), DelanArchitectureToJson(model.options()),
-                                model.parameters(), provenance, metrics, nullptr});
+                                model.parameters(), provenance, metrics, nullptr, model.precision()});
 }
 
-/// Loads a model file of kind "delan" or "delan-friction"; throws diffdyn::Error
+/// Loads a model file of kind "delan" or "delan-friction" in the precision it
+/// records; throws diffdyn::Error
 /// with one line naming the path.
 inline Delan LoadDelan(const std::filesystem::path& path, ModelFile* contents = nullptr) {
   RegisterDelanKind();
@@ -654,6 +727,7 @@ inline Delan LoadDelan(const std::filesystem::path& path, ModelFile* contents = 
     throw Error(StrCat(path.string(), ": ", e.what()));
   }
   Delan model(options, file.parameters);
+  model.SetPrecision(file.precision);
   if (contents) *contents = std::move(file);
   return model;
 }

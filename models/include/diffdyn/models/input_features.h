@@ -95,25 +95,28 @@ struct InputFeatures {
     const int n = static_cast<int>(x.size());
     ForEachInput(n, [&](int i, int f, bool p) {
       if (p) {
-        out->col(f) = gx.col(i) * std::cos(x[i]);
-        out->col(f + 1) = -gx.col(i) * std::sin(x[i]);
+        using S = typename GX::Scalar;
+        out->col(f) = gx.col(i) * S(std::cos(x[i]));
+        out->col(f + 1) = -gx.col(i) * S(std::sin(x[i]));
       } else {
         out->col(f) = gx.col(i);
       }
     });
   }
 
-  /// z (size(n) x B; resized) of inputs x (n x B), float or double (z's scalar is x's).
+  /// z (size(n) x B; resized) of inputs x (n x B), float or double: computed in
+  /// x's scalar, stored in z's.
   template <typename X, typename Z>
   void Encode(const X& x, Z* z) const {
+    using S = typename Z::Scalar;
     const int n = static_cast<int>(x.rows());
     z->resize(size(n), x.cols());
     ForEachInput(n, [&](int i, int f, bool p) {
       if (p) {
-        z->row(f) = x.row(i).array().sin().matrix();
-        z->row(f + 1) = x.row(i).array().cos().matrix();
+        z->row(f) = x.row(i).array().sin().matrix().template cast<S>();
+        z->row(f + 1) = x.row(i).array().cos().matrix().template cast<S>();
       } else {
-        z->row(f) = x.row(i);
+        z->row(f) = x.row(i).template cast<S>();
       }
     });
   }
