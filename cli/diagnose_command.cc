@@ -97,7 +97,7 @@ void RegisterDiagnoseCommand(CLI::App& app) {
   command->add_option("--out", o->request.out, "Output folder (report.md, extended_model.json, plots)")
       ->check(OutputPath(true))->required();
   command->add_option("--cutoff-hz", o->request.pipeline.cutoff_hz,
-                      "Zero-phase smoothing cutoff (Hz, at most 10; default 0: min(10 Hz, sample rate / 4))")
+                      "Zero-phase smoothing cutoff (Hz, at most 10; default 0: min(10 Hz, f_s / 4, max(f_s / 12, 2 f_99)), f_99 the torque's 99 % power bandwidth)")
       ->check(Bounded(0, 10));
   command
       ->add_option("--holdout", o->request.pipeline.holdout_fraction,

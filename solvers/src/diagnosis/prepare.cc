@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
+#include <vector>
 #include <functional>
 
 #include <ceres/ceres.h>
@@ -212,9 +214,59 @@ Dataset RecentreVelocity(const Dataset& data) {
   return out;
 }
 
+namespace {
+
+// The lowest frequency below which `fraction` of one trajectory's torque power
+// lies (header), searched up to max_hz (returned when not reached); -1 without
+// power. DFT bins k / (N dt) on the samples' own times, Hann-weighted.
+double TrajectoryTorqueBandwidth(const Eigen::VectorXd& t, const Eigen::MatrixXd& tau, double fraction,
+                                 double max_hz) {
+  const Eigen::Index count = t.size();
+  const double span = t[count - 1] - t[0];
+  Eigen::RowVectorXd w(count);
+  for (Eigen::Index k = 0; k < count; ++k) w[k] = 0.5 - 0.5 * std::cos(2 * std::numbers::pi * (t[k] - t[0]) / span);
+  Eigen::MatrixXd x = tau;
+  for (Eigen::Index j = 0; j < x.rows(); ++j) {
+    x.row(j).array() -= x.row(j).dot(w) / w.sum();
+    x.row(j).array() *= w.array();
+  }
+  const double total = count * x.squaredNorm();  // Parseval: sum over all N bins
+  if (!(total > 0)) return -1;
+  const double bin = (count - 1) / (count * span);
+  double power = 0;
+  Eigen::VectorXd re(count), im(count);
+  for (int k = 0; k * bin <= max_hz; ++k) {
+    for (Eigen::Index n = 0; n < count; ++n) {
+      const double angle = 2 * std::numbers::pi * k * bin * (t[n] - t[0]);
+      re[n] = std::cos(angle);
+      im[n] = std::sin(angle);
+    }
+    power += (k == 0 ? 1.0 : 2.0) * ((x * re).squaredNorm() + (x * im).squaredNorm());
+    if (power >= fraction * total) return k * bin;
+  }
+  return max_hz;
+}
+
+}  // namespace
+
+double TorqueBandwidthHz(const Dataset& data, double fraction, double max_hz) {
+  std::vector<double> per_trajectory;
+  for (const Trajectory& trajectory : data.trajectories) {
+    const auto tau = trajectory.channels.find("tau");
+    if (tau == trajectory.channels.end() || trajectory.t.size() < 16) continue;
+    const double f = TrajectoryTorqueBandwidth(trajectory.t, tau->second, fraction, max_hz);
+    if (f >= 0) per_trajectory.push_back(f);
+  }
+  return Median(per_trajectory);
+}
+
 double DefaultCutoffHz(const Dataset& data) {
   const double median = MedianSpacing(data);
-  return median > 0 ? std::min(kMaxCutoffHz, 0.25 / median) : kMaxCutoffHz;
+  if (!(median > 0)) return kMaxCutoffHz;
+  const double fs = 1.0 / median;
+  if (kMinKernelSpan * fs >= kMaxCutoffHz) return kMaxCutoffHz;
+  const double floor = 2 * TorqueBandwidthHz(data, 0.99, kMaxCutoffHz / 2);
+  return std::min({kMaxCutoffHz, fs / 4, std::max(kMinKernelSpan * fs, floor)});
 }
 
 PreparedData PrepareData(const ExtendedModel& nominal, const Dataset& data, const PrepareOptions& options) {
@@ -229,7 +281,7 @@ PreparedData PrepareData(const ExtendedModel& nominal, const Dataset& data, cons
   DIFFDYN_CHECK(options.holdout_fraction > 0 && options.holdout_fraction < 1,
                 "--holdout ", options.holdout_fraction, ": must be in (0, 1)");
   DIFFDYN_CHECK(options.cutoff_hz >= 0 && options.cutoff_hz <= kMaxCutoffHz, "--cutoff-hz ",
-                options.cutoff_hz, ": must be in (0, ", kMaxCutoffHz, "] Hz (0 = min(10 Hz, f_s / 4))");
+                options.cutoff_hz, ": must be in (0, ", kMaxCutoffHz, "] Hz (0 = the default rule)");
   PreparedData prep;
   prep.model = model;
   prep.params = params;

@@ -114,9 +114,29 @@ TEST(RecentreVelocity, MovesABackwardDifferenceToTheSampleTimes) {
   EXPECT_LT(after, 5e-5);
 }
 
-TEST(DefaultCutoffHz, IsTenHertzOrAQuarterOfTheSampleRate) {
+double Sine2Hz(double t) { return std::sin(2 * std::numbers::pi * 2.0 * t); }
+double Sine3Hz(double t) { return std::sin(2 * std::numbers::pi * 3.0 * t); }
+double Still(double /*t*/) { return 1.5; }
+
+TEST(TorqueBandwidthHz, IsTheFrequencyOfASineAndCappedForNoise) {
+  EXPECT_NEAR(TorqueBandwidthHz(Record(30.0, 0.01, 0.05, 0.0, 1, Sine2Hz).AsDataset(), 0.99, 5.0), 2.0, 0.1);
+  // White noise spreads its power to the Nyquist frequency: not reached below 5 Hz.
+  EXPECT_DOUBLE_EQ(TorqueBandwidthHz(Record(30.0, 0.05, 0.0, 1.0, 1, Still).AsDataset(), 0.99, 5.0), 5.0);
+}
+
+// min(10 Hz, f_s / 4, max(f_s / 12, 2 f_99)): 10 Hz from 120 Hz up; at lower rates
+// the kernel spans at least 1.6 samples (s = sqrt(ln 2) / (2 pi f_c)) unless the
+// torque's bandwidth needs a higher cutoff.
+TEST(DefaultCutoffHz, SpansSamplesAtLowRatesAndKeepsTheTorquesBandwidth) {
   EXPECT_DOUBLE_EQ(DefaultCutoffHz(Record(5.0, 1e-3, 0.0, 0.0, 1, Motion).AsDataset()), kMaxCutoffHz);
-  EXPECT_NEAR(DefaultCutoffHz(Record(30.0, 0.05, 0.0, 0.0, 1, Motion).AsDataset()), 5.0, 1e-9);
+  EXPECT_NEAR(DefaultCutoffHz(Record(5.0, 1.0 / 120, 0.0, 0.0, 1, Motion).AsDataset()), kMaxCutoffHz, 1e-9);
+  const double slow = DefaultCutoffHz(Record(30.0, 1.0 / 60, 0.0, 0.0, 1, Motion).AsDataset());
+  EXPECT_NEAR(slow, 5.0, 1e-9);  // 0.7 Hz motion: f_s / 12
+  EXPECT_GT(std::sqrt(std::log(2.0)) / (2 * std::numbers::pi * slow), 1.5 / 60);
+  // A 3 Hz torque at 25 Hz: f_s / 12 = 2.1 Hz would remove it; the floor 2 f_99 keeps it.
+  EXPECT_NEAR(DefaultCutoffHz(Record(30.0, 0.04, 0.0, 0.0, 1, Sine3Hz).AsDataset()), 6.0, 0.25);
+  // A held pose at 20 Hz, torque noise only: f_s / 4.
+  EXPECT_NEAR(DefaultCutoffHz(Record(30.0, 0.05, 0.0, 0.1, 1, Still).AsDataset()), 5.0, 1e-9);
 }
 
 TEST(PrepareData, SplitsInTimeAndRefusesAShortRecord) {

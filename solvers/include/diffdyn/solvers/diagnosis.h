@@ -4,7 +4,7 @@
 // the stages of solvers/diagnosis/, each a function with its own header:
 //
 //   prepare      (prepare.h) torque and velocity noise from the raw samples,
-//                zero-phase smoothing at f_c = min(10 Hz, f_s / 4), the nominal
+//                zero-phase smoothing at f_c = min(10 Hz, f_s / 4, max(f_s / 12, 2 f_99)), the nominal
 //                residual r = tau - ID on decimated rows, a train / held-out split
 //                (the last 30 % in time);
 //   candidates   (candidates.h) each effect of effects.h linearised into regressor
@@ -52,7 +52,7 @@ namespace diffdyn {
 
 /// Settings of Diagnose; defaults are what `diffdyn diagnose` uses.
 struct DiagnosisOptions {
-  double cutoff_hz = 0.0;            ///< smoothing cutoff f_c (Hz, <= 10); 0 = min(10, f_s / 4)
+  double cutoff_hz = 0.0;            ///< smoothing cutoff f_c (Hz, <= 10); 0 = the rule of prepare.h
   double holdout_fraction = 0.3;     ///< last fraction of the rows held out
   int folds = 5;                     ///< blocked cross-validation folds
   double min_effect_to_noise = 1.0;  ///< an effect's torque RMS_j / noise sigma_j to count (system-wide: RMS over j)

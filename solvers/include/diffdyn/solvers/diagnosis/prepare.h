@@ -15,10 +15,19 @@
 //             lags the motion by half a sample; it is detected (equal to within
 //             0.3 % relative RMS, which time stamps rounded to 1 us pass) and re-centred by interpolating each value,
 //             which belongs to the midpoint (t_{k-1} + t_k) / 2, back to t_k.
-//   cutoff    the zero-phase smoothing cutoff f_c = min(10 Hz, f_s / 4) with f_s
-//             the median sample rate (kMaxCutoffHz; f_s / 4 keeps at least
-//             two samples inside the kernel's half width), unless given;
-//             the nominal and every extended model see the same smoothing.
+//   cutoff    the zero-phase smoothing cutoff, unless given,
+//               f_c = min(10 Hz, f_s / 4, max(f_s / 12, 2 f_99)),
+//             f_s the median sample rate, f_99 the frequency below which 99 % of
+//             the measured torque's power lies (TorqueBandwidthHz). f_s / 12 makes
+//             the Gaussian's s = sqrt(ln 2) / (2 pi f_c) at least 1.6 sample
+//             periods, so velocities and accelerations average several samples
+//             rather than differencing neighbours: at 50-100 Hz a torque held over
+//             each sample period (zero-order hold) otherwise reads as extra inertia,
+//             because the sampled motion averages the held steps while the torque
+//             record does not. The floor 2 f_99 keeps the dynamics (amplitude
+//             >= 0.92 up to f_99), f_s / 4 keeps two samples in the kernel's half
+//             width; above 120 Hz the rule is 10 Hz. The nominal and every extended
+//             model see the same smoothing.
 //   nominal   r_k = tau_k - tau_hat_k on the decimated rows, tau_hat the model
 //             under test: ID(q_k, qd_k, qdd_k; p) for an analytic model, or the
 //             prediction of an extended model fed back (refit.h), after optional
@@ -42,6 +51,9 @@ namespace diffdyn {
 
 /// Highest smoothing cutoff (Hz) the diagnosis uses (model_conventions.md).
 inline constexpr double kMaxCutoffHz = 10.0;
+/// The default cutoff is at most this fraction of the sample rate unless the torque's
+/// own bandwidth needs more (header).
+inline constexpr double kMinKernelSpan = 1.0 / 12;
 
 /// Robust white-noise standard deviation of each row of `signal` (n x N, samples at
 /// times `t`, segments starting at `segment_starts`) from the deviation of each
@@ -57,7 +69,14 @@ bool IsBackwardDifference(const Dataset& data);
 /// `data` with a backward-difference qd moved to the sample times (header).
 Dataset RecentreVelocity(const Dataset& data);
 
-/// The default cutoff min(kMaxCutoffHz, f_s / 4) of `data` (Hz), f_s its median sample rate.
+/// The frequency (Hz) below which `fraction` of the measured torque's power lies:
+/// per trajectory, the Hann-weighted DFT of each joint's torque (mean removed) on
+/// the samples' own times, summed over the joints and accumulated bin by bin
+/// against the total power (Parseval); searched up to `max_hz` (returned when not
+/// reached); the median over the trajectories with torque (0 without any).
+double TorqueBandwidthHz(const Dataset& data, double fraction, double max_hz);
+
+/// The default cutoff of `data` (Hz, header): min(10, f_s / 4, max(f_s / 12, 2 f_99)).
 double DefaultCutoffHz(const Dataset& data);
 
 /// The prepared record every later stage reads.
