@@ -35,9 +35,10 @@
 // or ceres::Jet), so a DeLaN can be linearised or integrated with Jets.
 //
 // Precision: SetPrecision(Precision::kF32) runs the batched paths (TorqueLoss,
-// Decompose) on a float copy of the network (sgemm, float heads); the loss, the
-// chunk sums, the friction head and the parameters stay double, and results are
-// the same at any thread count in either precision.
+// Decompose) on a float copy of the network (sgemm, float heads); the loss and its
+// chunk sums, the friction head and the parameters stay double (the network's
+// gradient is summed in float chunk by chunk, as Mlp<float> does, then widened),
+// and results are the same at any thread count in either precision.
 //
 //   Delan model = Delan::Initialized({.dof = 2}, /*seed=*/0);
 //   Delan cartpole = Delan::Initialized({.dof = 2, .periodic = {1}, .friction = true}, 0);
@@ -325,9 +326,9 @@ class Delan {
   }
 
   /// The precision of the batched paths (TorqueLoss, Decompose): float64, or
-  /// float32 on a float copy of the network with the loss, the gradient's sum
-  /// over chunks and the friction head in double. Parameters stay double; the
-  /// single-sample paths compute in their own scalar.
+  /// float32 on a float copy of the network, with the loss, its chunk sums and
+  /// the friction head in double. Parameters stay double; the single-sample
+  /// paths compute in their own scalar.
   Precision precision() const { return precision_; }
   /// Sets the precision of the batched paths.
   void SetPrecision(Precision p) {
