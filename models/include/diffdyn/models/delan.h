@@ -454,7 +454,10 @@ class Delan {
     net.Forward(buf->z, &buf->y, &buf->jac, &buf->mlp, threads);
     const int n = dof(), nz = static_cast<int>(buf->z.rows()), chunk = buf->mlp.chunk_size();
     const int chunks = NumChunks(batch, chunk);
-    PrepareHeads(buf, ws, chunks);
+    PrepareHeads(buf, chunks);
+    ws->friction_grad.resize(chunks);
+    for (Eigen::VectorXd& g : ws->friction_grad) g.setZero(options_.num_friction_parameters());
+    ws->chunk_loss.assign(chunks, 0.0);
     if (grad) {
       buf->ybar.resize(buf->y.rows(), batch);
       buf->jbar.resize(buf->jac.rows(), buf->jac.cols());
@@ -508,8 +511,7 @@ class Delan {
     features.Encode(q, &buf->z);
     net.Forward(buf->z, &buf->y, &buf->jac, &buf->mlp, threads);
     const int nz = static_cast<int>(buf->z.rows()), chunk = buf->mlp.chunk_size();
-    DelanWorkspace unused;
-    PrepareHeads(buf, &unused, NumChunks(batch, chunk));
+    PrepareHeads(buf, NumChunks(batch, chunk));
     DelanParts p;
     for (Eigen::MatrixXd* m : {&p.torque, &p.inertial, &p.coriolis, &p.gravity, &p.friction}) m->resize(n, batch);
     for (Eigen::RowVectorXd* r : {&p.kinetic, &p.potential, &p.power, &p.min_mass_eigenvalue}) r->resize(batch);
@@ -581,9 +583,9 @@ class Delan {
                   "DeLaN: q, qd, qdd must be ", dof(), " x B with one B, got ", q.rows(), " x ", q.cols(),
                   ", ", qd.rows(), " x ", qd.cols(), ", ", qdd.rows(), " x ", qdd.cols());
   }
-  // Sizes the per-chunk heads and Jacobians of `buf` and the per-chunk sums of `ws`.
+  // Sizes the per-chunk heads and Jacobians of `buf`.
   template <typename S>
-  void PrepareHeads(DelanBuffers<S>* buf, DelanWorkspace* ws, int chunks) const {
+  void PrepareHeads(DelanBuffers<S>* buf, int chunks) const {
     if (!buf->heads.empty() && buf->heads.front().dof() != dof()) {
       buf->heads.clear();
       buf->jq.clear();
@@ -597,9 +599,6 @@ class Delan {
       buf->jq[c].resize(m, dof());  // no-op after the first call
       buf->jq_bar[c].resize(m, dof());
     }
-    ws->friction_grad.resize(chunks);
-    for (Eigen::VectorXd& g : ws->friction_grad) g.setZero(options_.num_friction_parameters());
-    ws->chunk_loss.assign(chunks, 0.0);
   }
 
   DelanOptions options_;
