@@ -9,26 +9,28 @@ input Jacobian carried through the layers in closed form (B x width x n); H = L 
 tau = H qdd + c + g; loss mean |tau^ - tau|^2; autograd for the parameter gradient;
 Adam with AMSGrad, lr 5e-4, weight decay 1e-5; batch 512 over the 2459 training
 samples of the DeLaN characters (5 batches), in float64 and in float32 (the rows
-BM_DelanEpoch and BM_DelanEpochF32). Timed on 1 and 2 torch threads; the best is
-PyTorch at its fastest. Prints the ratios to the C++ run of the same
-`make bench` (delan_training.json next to --out).
+BM_DelanEpoch and BM_DelanEpochF32). Runs in both two-core configurations (torch 2
+threads with OpenBLAS 1, torch 1 with OpenBLAS 2), each in its own process, and keeps
+the faster per precision. Prints our best row over PyTorch's best, per precision, when
+the C++ run of the same `make bench` (delan_training.json) is next to --out.
 
     MALLOC_MMAP_THRESHOLD_=1000000000 MALLOC_TRIM_THRESHOLD_=1000000000 \
       /usr/bin/python3 bench/delan_training_torch.py --out r.json
+    DIFFDYN_DELAN_CSV=path overrides the data file.
 """
-import argparse
 import csv
 import json
 import os
 
 import torch
 
-from torch_common import blas_in_use, time_it
+from torch_common import describe_torch, ours_best, reference_beside_ours, time_it
 
 BATCH = 512
 WIDTH = 64
 EPS = 0.01
 TEST = {"e", "q", "v"}
+DATA = os.environ.get("DIFFDYN_DELAN_CSV", "../shared/data/delan_characters/character_data.csv")
 
 
 def read_characters(path):
@@ -101,53 +103,53 @@ def epoch(model, opt, data, gen):
     return loss.item()
 
 
-def time_epochs(threads, data, repeats, dtype):
-    torch.set_num_threads(threads)
+def time_epochs(data, dtype, repeats=21):
+    """Median wall seconds of one epoch in dtype."""
     torch.manual_seed(0)
     data = [x.to(dtype) for x in data]
     model = Delan(2, dtype)
     opt = torch.optim.Adam(model.parameters(), lr=5e-4, weight_decay=1e-5, amsgrad=True)
     gen = torch.Generator().manual_seed(1)
-    return time_it(lambda: epoch(model, opt, data, gen), repeats)
+    return time_it(lambda: epoch(model, opt, data, gen), repeats)[0]
+
+
+def measure(torch_threads):
+    """Median epoch seconds per precision with torch on torch_threads (the process's
+    OPENBLAS_NUM_THREADS set by fastest_two_core)."""
+    describe_torch(torch_threads)
+    # The data path is relative to the repository root (this script runs in bench/).
+    path = DATA if os.path.isabs(DATA) else os.path.join("..", DATA)
+    data = read_characters(path)
+    return {f"{name}/delan_epoch": time_epochs(data, dtype)
+            for name, dtype in (("float64", torch.float64), ("float32", torch.float32))}
+
+
+def precision_of(name):
+    """Our epoch rows by precision (BM_DelanEpoch, BM_DelanEpochF32); None for the others."""
+    if name.startswith("BM_DelanEpochF32/"):
+        return "float32"
+    if name.startswith("BM_DelanEpoch/"):
+        return "float64"
+    return None
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--out", default="delan_training_torch.json")
-    parser.add_argument("--data", default="../shared/data/delan_characters/character_data.csv")
-    parser.add_argument("--repeats", type=int, default=21)
-    args = parser.parse_args()
-    blas = blas_in_use()
-    print("torch", torch.__version__, "BLAS in use:", ", ".join(blas) if blas else "(none found)",
-          "MALLOC_MMAP_THRESHOLD_", os.environ.get("MALLOC_MMAP_THRESHOLD_"))
-    data = read_characters(args.data)
-    samples = data[0].shape[0]
-    result = {"samples": samples, "blas": blas, "torch": torch.__version__}
-    for dtype, suffix in ((torch.float64, ""), (torch.float32, "_f32")):
-        for threads in (1, 2):
-            wall, cpu = time_epochs(threads, data, args.repeats, dtype)
-            result[f"epoch_seconds{suffix}_{threads}"] = wall
-            result[f"epoch_cpu_seconds{suffix}_{threads}"] = cpu
-            print(f"DeLaN epoch ({samples} samples, batch {BATCH}, {dtype}), {threads} thread(s): "
-                  f"median {wall * 1e3:.1f} ms wall, {cpu * 1e3:.1f} ms CPU, "
-                  f"{wall / samples * 1e6:.2f} us per sample")
+    run = reference_beside_ours(__file__, measure, "delan_training.json")
+    if run is None or run[3] is None:
+        return
+    args, by_config, best, path = run
+    # One iteration of ours is 50 epochs: its counter epoch_s is the time per epoch.
+    ours = ours_best(path, precision_of, lambda run: run["epoch_s"])
+    summary = {}
+    for precision, (seconds, name) in sorted(ours.items()):
+        torch_s = best[f"{precision}/delan_epoch"]["seconds"]
+        print(f"{precision}: ours {name} {seconds * 1e3:.2f} ms per epoch, PyTorch best "
+              f"{torch_s * 1e3:.2f} ms ({best[f'{precision}/delan_epoch']['config']}), "
+              f"ours / PyTorch = {seconds / torch_s:.2f}x")
+        summary[precision] = {"ours_seconds": seconds, "torch_seconds": torch_s,
+                              "ours_over_torch": seconds / torch_s}
     with open(args.out, "w") as f:
-        json.dump(result, f)
-    ours_path = os.path.join(os.path.dirname(os.path.abspath(args.out)), "delan_training.json")
-    if os.path.exists(ours_path):
-        report(json.load(open(ours_path))["benchmarks"], result)
-
-
-def report(benchmarks, torch_result):
-    """Ours (delan_training.json of the same run) next to PyTorch's best thread count, same precision."""
-    for row, suffix in (("BM_DelanEpoch/", ""), ("BM_DelanEpochF32/", "_f32")):
-        best = min(torch_result[f"epoch_seconds{suffix}_1"], torch_result[f"epoch_seconds{suffix}_2"])
-        for b in benchmarks:
-            if b.get("run_type") == "aggregate" or not b["name"].startswith(row):
-                continue
-            ours = b["epoch_s"]
-            print(f"{b['name']}: ours {ours * 1e3:.2f} ms per epoch; PyTorch (best of 1, 2 threads) "
-                  f"{best * 1e3:.2f} ms; ours / PyTorch = {ours / best:.2f}x")
+        json.dump({"by_config": by_config, "best": best, "summary": summary}, f, indent=1)
 
 
 if __name__ == "__main__":

@@ -2,14 +2,15 @@
 // grid points = 9 steps, double) on 1000 transitions of the shared PyBullet data in
 // batches of 500 with Adam, on 1 and 2 threads and for several chunk sizes (samples
 // per thread task, TrainOptions::chunk_size); the same with dopri5 (tolerance 1e-8)
-// for the dopri5 / rk4 ratio; and the machine's peak: the best two-thread
-// double-precision matrix product at 2048^3 (Eigen, columns split over two threads).
+// for the dopri5 / rk4 ratio; the same rk4 epoch in float32; and the machine's peak:
+// the best two-thread matrix product at 2048^3 (double: Eigen with columns split over
+// two threads, and OpenBLAS; float: OpenBLAS).
 // The PyTorch reference of the same epoch is bench/pushing_epoch_torch.py.
 //
 // Counters: "GFLOP/s" counts the useful matrix flops of an epoch as PyTorch does
 // them (forward + 2 x forward for backward = 3 x 2 x 11,200 per MLP evaluation, 36
 // evaluations per sample with rk4; ours keeps every stage's activations, so it does
-// no more); divide by the best BM_PeakDgemm* GFLOP/s for the fraction of peak. CPU
+// no more); divide by the same precision's best BM_Peak* GFLOP/s for the fraction of peak. CPU
 // times are of the whole process (all threads).
 //
 //   OPENBLAS_NUM_THREADS=1 build/bench/bench_pushing_epoch   (from the repository root;
@@ -129,6 +130,16 @@ void BM_PeakDgemmOpenBlas2Threads(benchmark::State& state) {
   bench::PeakGemmOpenBlas2Threads<double>(state);
 }
 BENCHMARK(BM_PeakDgemmOpenBlas2Threads)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(2.0);
+
+// The float32 peak, for BM_EpochAbsNodeRk4F32's fraction.
+void BM_PeakSgemmOpenBlas2Threads(benchmark::State& state) {
+  bench::PeakGemmOpenBlas2Threads<float>(state);
+}
+BENCHMARK(BM_PeakSgemmOpenBlas2Threads)
     ->MeasureProcessCPUTime()
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond)

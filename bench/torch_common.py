@@ -120,18 +120,23 @@ def describe_torch(torch_threads):
           file=sys.stderr)
 
 
-def ours_best(path, key_of):
-    """Our fastest wall time per workload in a Google Benchmark JSON file: {key: (seconds,
-    benchmark name)}, where key_of(name) names a run's workload (None skips the run)."""
+def wall_seconds(run):
+    """A Google Benchmark run's wall time per iteration in seconds."""
+    return run["real_time"] * {"ms": 1e-3, "us": 1e-6, "ns": 1e-9, "s": 1.0}[run["time_unit"]]
+
+
+def ours_best(path, key_of, seconds_of=wall_seconds):
+    """Our fastest time per workload in a Google Benchmark JSON file: {key: (seconds,
+    benchmark name)}, where key_of(name) names a run's workload (None skips the run) and
+    seconds_of(run) reads its time (default: wall time per iteration)."""
     with open(path) as f:
         runs = json.load(f)["benchmarks"]
-    scale = {"ms": 1e-3, "us": 1e-6, "ns": 1e-9, "s": 1.0}
     best = {}
     for run in runs:
         key = key_of(run["name"])
         if key is None or run.get("run_type") == "aggregate":
             continue
-        seconds = run["real_time"] * scale[run["time_unit"]]
+        seconds = seconds_of(run)
         if key not in best or seconds < best[key][0]:
             best[key] = (seconds, run["name"])
     return best
@@ -152,3 +157,20 @@ def two_core_reference(script, measure):
         print(json.dumps(measure(args.torch_threads)))
         return None
     return (args, *fastest_two_core(script))
+
+
+def ours_next_to(out, name):
+    """The path of our Google Benchmark JSON `name` written next to the reference's --out
+    file `out` in the same run, or None (no --out, or no such file)."""
+    if not out:
+        return None
+    path = os.path.join(os.path.dirname(out) or ".", name)
+    return path if os.path.exists(path) else None
+
+
+def reference_beside_ours(script, measure, ours_name):
+    """two_core_reference(script, measure) plus the path of our results `ours_name` of the
+    same run (ours_next_to): None in the internal mode, else (args, by_config, best,
+    path or None)."""
+    run = two_core_reference(script, measure)
+    return None if run is None else (*run, ours_next_to(run[0].out, ours_name))

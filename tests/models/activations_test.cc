@@ -73,6 +73,34 @@ TEST(Activations, BatchedMatchesScalar) {
   }
 }
 
+// The sigmoid's branch (1 / (1 + e) for z >= 0, e / (1 + e) below) is chosen from
+// z's sign bit: -0 and +0 give 1/2, a NaN stays NaN, and float agrees with double
+// on both sides of 0 (the float path is a separate instantiation).
+TEST(Activations, SigmoidBranchFollowsTheSignInBothPrecisions) {
+  for (const Activation& act :
+       {Activation::Softplus(), Activation::Softplus(3.0), Activation::Sigmoid()}) {
+    double a[4] = {-0.0, 0.0, std::nan(""), -3.0}, g[4], dg[4];
+    ApplyActivation(act, a, 4, g, dg, nullptr);
+    const double at_zero = act.kind == ActivationKind::kSigmoid ? 0.25 : 0.5;
+    EXPECT_EQ(dg[0], at_zero) << ActivationName(act.kind);
+    EXPECT_EQ(dg[1], at_zero) << ActivationName(act.kind);
+    EXPECT_TRUE(std::isnan(dg[2]) && std::isnan(g[2])) << ActivationName(act.kind);
+    EXPECT_NEAR(dg[3], ActivationDerivative(act, -3.0), 1e-16) << ActivationName(act.kind);
+
+    Eigen::ArrayXf af(130);
+    for (int i = 0; i < af.size(); ++i) af[i] = -9.0f + 18.0f * static_cast<float>(i) / 129.0f;
+    Eigen::ArrayXf gf(af.size()), dgf(af.size());
+    ApplyActivation(act, af.data(), af.size(), gf.data(), dgf.data(), nullptr);
+    for (int i = 0; i < af.size(); ++i) {
+      const double x = af[i];
+      EXPECT_NEAR(gf[i], ActivationValue(act, x), 2e-6 * (1.0 + std::abs(x)))
+          << ActivationName(act.kind) << " at " << x;
+      EXPECT_NEAR(dgf[i], ActivationDerivative(act, x), 2e-6 * (1.0 + act.param))
+          << ActivationName(act.kind) << " at " << x;
+    }
+  }
+}
+
 TEST(Activations, ReluKinkHasZeroDerivative) {
   EXPECT_EQ(ActivationDerivative(Activation::Relu(), 0.0), 0.0);
   EXPECT_EQ(ActivationValue(Activation::Relu(), -3.0), 0.0);

@@ -33,7 +33,9 @@
 #pragma once
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <string>
 #include <type_traits>
 
@@ -253,14 +255,35 @@ namespace internal {
 // For m values z = p a[i] (m <= 64): e[i] = exp(-|z|) in (0, 1] and
 // s[i] = sigmoid(z) = 1 / (1 + exp(-z)), as 1 / (1 + e) for z >= 0 and
 // e / (1 + e) otherwise: no overflow, one division. e and s must not alias a.
+// v[i] = sign bit of z[i] clear ? v[i] : e[i] v[i], in bit operations: GCC does
+// not vectorise a floating-point comparison under -ftrapping-math (its default),
+// nor does Eigen 3.4 vectorise select. z = -0 takes e v, which is v there (e = 1).
+template <typename S>
+inline void MultiplyWhereNegative(const S* __restrict z, const S* __restrict e,
+                                  S* __restrict v, Eigen::Index m) {
+  using U = std::conditional_t<sizeof(S) == 4, std::uint32_t, std::uint64_t>;
+  constexpr int kSignShift = 8 * sizeof(S) - 1;
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const U negative = U(0) - (std::bit_cast<U>(z[i]) >> kSignShift);  // all ones or 0
+    const U keep = std::bit_cast<U>(v[i]);
+    const U scaled = std::bit_cast<U>(e[i] * v[i]);
+    v[i] = std::bit_cast<S>((keep & ~negative) | (scaled & negative));
+  }
+}
+
+// For m values z = p a[i] (m <= 64): e[i] = exp(-|z|) in (0, 1] and
+// s[i] = sigmoid(z) = 1 / (1 + exp(-z)), as 1 / (1 + e) for z >= 0 and
+// e / (1 + e) otherwise: no overflow, one division. e and s must not alias a.
 template <typename S>
 inline void SigmoidBlock(const S* a, S p, Eigen::Index m, S* e, S* s) {
   using ArrayS = Eigen::Array<S, Eigen::Dynamic, 1>;
   const Eigen::Map<const ArrayS> av(a, m);
   Eigen::Map<ArrayS> ev(e, m), sv(s, m);
-  ev = (-(p * av).abs()).exp();
+  S z[64];
+  Eigen::Map<ArrayS>(z, m) = p * av;
+  ev = (-Eigen::Map<ArrayS>(z, m).abs()).exp();
   sv = S(1) / (S(1) + ev);
-  sv = (p * av >= S(0)).select(sv, ev * sv);
+  MultiplyWhereNegative(z, e, s, m);
 }
 
 }  // namespace internal

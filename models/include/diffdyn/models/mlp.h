@@ -420,21 +420,13 @@ class Mlp {
                Workspace* ws, int threads = 1) const
     requires std::is_floating_point_v<T>
   {
-    DIFFDYN_CHECK(X.rows() == num_inputs(), "MLP expects inputs with ", num_inputs(),
-                  " rows, got ", X.rows());
-    DIFFDYN_CHECK(ws != nullptr && Y != nullptr, "Mlp::Forward needs Y and a workspace");
-    const int batch = static_cast<int>(X.cols());
-    const int n0 = num_inputs();
-    ws->Reserve(arch_, batch, jac != nullptr);
-    ws->batch_ = batch;
-    if (Y->rows() != num_outputs() || Y->cols() != batch) Y->resize(num_outputs(), batch);
-    if (jac && (jac->rows() != num_outputs() || jac->cols() != Eigen::Index(n0) * batch)) {
-      jac->resize(num_outputs(), Eigen::Index(n0) * batch);
-    }
-    ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
-      ForwardChunk(X.middleCols(begin, end - begin), Y->middleCols(begin, end - begin),
-                   jac ? &*jac : nullptr, begin, &ws->chunks_[c]);
-    });
+    PrepareForward(X, Y, jac, ws);
+    ParallelForChunks(static_cast<int>(X.cols()), ws->chunk_size(), threads,
+                      [&](int c, int begin, int end) {
+                        ForwardChunk(X.middleCols(begin, end - begin),
+                                     Y->middleCols(begin, end - begin), jac ? &*jac : nullptr,
+                                     begin, &ws->chunks_[c]);
+                      });
   }
 
   /// Values only: Y = f(X) for the batch X (n_0 x B) into Y (n_L x B, sized by
@@ -525,7 +517,7 @@ class Mlp {
     requires std::is_floating_point_v<T>
   {
     DIFFDYN_CHECK(jac != nullptr, "Mlp::InputJacobianReverse needs an output Jacobian");
-    Forward(X, Y, nullptr, ws, threads);
+    PrepareForward(X, Y, nullptr, ws);
     const int batch = static_cast<int>(X.cols());
     const int n0 = num_inputs();
     const int m = num_outputs();
@@ -534,9 +526,12 @@ class Mlp {
     }
     const int cap = ws->chunk_size();
     const int L = arch_.num_layers();
+    // Each chunk's forward pass and its sweeps run back to back on one thread,
+    // so the tape is still in cache when the sweeps read it.
     ParallelForChunks(batch, cap, threads, [&](int c, int begin, int end) {
       typename Workspace::Chunk& ch = ws->chunks_[c];
       const int nb = end - begin;
+      ForwardChunk(X.middleCols(begin, nb), Y->middleCols(begin, nb), nullptr, begin, &ch);
       const int width = arch_.max_width();
       // The chain below reads g' stored; ReLU's comes off its output: 1 .* [h > 0].
       for (int l = 0; l + 1 < L; ++l) {
@@ -593,13 +588,29 @@ class Mlp {
 
  private:
 
-  // Whether hidden layer l's g' is read off its output instead of stored: ReLU's
-  // g' = [g > 0], on a forward pass without the Jacobian chain (which needs the
-  // stored g'). Half the memory traffic of a training tape.
+  // Checks X, sizes the workspace for the batch and Y (n_L x B) and jac (n_L x n_0 B, when
+  // not null): what every forward pass needs before its chunks run.
+  void PrepareForward(const MatrixB& X, MatrixB* Y, MatrixB* jac, Workspace* ws) const {
+    DIFFDYN_CHECK(X.rows() == num_inputs(), "MLP expects inputs with ", num_inputs(),
+                  " rows, got ", X.rows());
+    DIFFDYN_CHECK(ws != nullptr && Y != nullptr, "Mlp::Forward needs Y and a workspace");
+    const int batch = static_cast<int>(X.cols());
+    const int n0 = num_inputs();
+    ws->Reserve(arch_, batch, jac != nullptr);
+    ws->batch_ = batch;
+    if (Y->rows() != num_outputs() || Y->cols() != batch) Y->resize(num_outputs(), batch);
+    if (jac && (jac->rows() != num_outputs() || jac->cols() != Eigen::Index(n0) * batch)) {
+      jac->resize(num_outputs(), Eigen::Index(n0) * batch);
+    }
+  }
+
   // Whether Evaluate runs the layer kernel (AVX-512 or AVX2 targets; double and float).
   static constexpr bool kUseLayerKernel =
       kHaveLayerKernel && (std::is_same_v<T, double> || std::is_same_v<T, float>);
 
+  // Whether hidden layer l's g' is read off its output instead of stored: ReLU's
+  // g' = [g > 0], on a forward pass without the Jacobian chain (which needs the
+  // stored g'). Half the memory traffic of a training tape.
   bool DerivativeFromOutput(const typename Workspace::Chunk& ch, int l) const {
     return !ch.has_jacobian && arch_.activations[l].kind == ActivationKind::kRelu;
   }
