@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include <ceres/jet.h>
@@ -99,6 +100,28 @@ TEST(Activations, SigmoidBranchFollowsTheSignInBothPrecisions) {
           << ActivationName(act.kind) << " at " << x;
     }
   }
+}
+
+// ReLU's indicator and positive part are read off the bits; they must equal the
+// comparisons x > 0 ? 1 : 0 and x > 0 ? x : 0 on every class of value.
+template <typename S>
+void ExpectPositiveBitsMatchComparisons() {
+  const S inf = std::numeric_limits<S>::infinity();
+  const S tiny = std::numeric_limits<S>::denorm_min();
+  for (const S x : {S(0), S(-0.0), tiny, -tiny, S(1e-30), S(2.5), S(-2.5), inf, -inf,
+                    std::numeric_limits<S>::max(), std::numeric_limits<S>::lowest(),
+                    std::numeric_limits<S>::quiet_NaN(), -std::numeric_limits<S>::quiet_NaN()}) {
+    const S indicator = x > S(0) ? S(1) : S(0);
+    const S part = x > S(0) ? x : S(0);
+    EXPECT_EQ(internal::PositiveIndicator(x), indicator) << x;
+    EXPECT_EQ(internal::PositivePart(x), part) << x;
+    EXPECT_FALSE(std::signbit(internal::PositivePart(x))) << x;
+  }
+}
+
+TEST(Activations, ReluPiecesFromBitsMatchComparisons) {
+  ExpectPositiveBitsMatchComparisons<double>();
+  ExpectPositiveBitsMatchComparisons<float>();
 }
 
 TEST(Activations, ReluKinkHasZeroDerivative) {

@@ -36,6 +36,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <type_traits>
 
@@ -255,13 +256,38 @@ namespace internal {
 // For m values z = p a[i] (m <= 64): e[i] = exp(-|z|) in (0, 1] and
 // s[i] = sigmoid(z) = 1 / (1 + exp(-z)), as 1 / (1 + e) for z >= 0 and
 // e / (1 + e) otherwise: no overflow, one division. e and s must not alias a.
-// v[i] = sign bit of z[i] clear ? v[i] : e[i] v[i], in bit operations: GCC does
-// not vectorise a floating-point comparison under -ftrapping-math (its default),
-// nor does Eigen 3.4 vectorise select. z = -0 takes e v, which is v there (e = 1).
+// The unsigned integer of S's size, for choices made on a value's bits: GCC does not
+// vectorise a floating-point comparison under -ftrapping-math (its default), nor does
+// Eigen 3.4 vectorise select, while integer comparisons and masks vectorise.
+template <typename S>
+using BitsOf = std::conditional_t<sizeof(S) == 4, std::uint32_t, std::uint64_t>;
+
+// All ones where x > 0 (up to +inf), else 0 (for +-0, negatives and NaN): x > 0 exactly
+// when its bits, read as an unsigned integer, lie in [1, bits(+inf)].
+template <typename S>
+inline BitsOf<S> PositiveMask(S x) {
+  using U = BitsOf<S>;
+  constexpr U kInf = std::bit_cast<U>(std::numeric_limits<S>::infinity());
+  return U(0) - U(std::bit_cast<U>(x) - U(1) < kInf);
+}
+
+// [x > 0] (1 or 0) and x [x > 0] (x or +0) from PositiveMask, the same values as the
+// comparisons give, NaN included (0 and +0).
+template <typename S>
+inline S PositiveIndicator(S x) {
+  return std::bit_cast<S>(PositiveMask(x) & std::bit_cast<BitsOf<S>>(S(1)));
+}
+template <typename S>
+inline S PositivePart(S x) {
+  return std::bit_cast<S>(PositiveMask(x) & std::bit_cast<BitsOf<S>>(x));
+}
+
+// v[i] = sign bit of z[i] clear ? v[i] : e[i] v[i], in bit operations (see BitsOf).
+// z = -0 takes e v, which is v there (e = 1).
 template <typename S>
 inline void MultiplyWhereNegative(const S* __restrict z, const S* __restrict e,
                                   S* __restrict v, Eigen::Index m) {
-  using U = std::conditional_t<sizeof(S) == 4, std::uint32_t, std::uint64_t>;
+  using U = BitsOf<S>;
   constexpr int kSignShift = 8 * sizeof(S) - 1;
   for (Eigen::Index i = 0; i < m; ++i) {
     const U negative = U(0) - (std::bit_cast<U>(z[i]) >> kSignShift);  // all ones or 0
@@ -315,8 +341,8 @@ inline void ApplyActivation(const Activation& act, const S* a, Eigen::Index n,
       if (dg) {
         for (Eigen::Index i = 0; i < n; ++i) {
           const S v = a[i];
-          dg[i] = v > zero ? one : zero;
-          g[i] = v > zero ? v : zero;
+          dg[i] = internal::PositiveIndicator(v);
+          g[i] = internal::PositivePart(v);
         }
       } else {
         gv = av.max(zero);

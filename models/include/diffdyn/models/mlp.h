@@ -616,15 +616,16 @@ class Mlp {
   }
 
   // abar .*= [h > 0] column by column (abar and h rows x nb): ReLU's g' applied from
-  // its output. A plain loop over contiguous columns, which the compiler vectorises
-  // (Eigen's bool-to-double cast runs scalar); the product keeps NaN and signed zeros.
+  // its output. A plain loop over contiguous columns with the indicator taken from h's
+  // bits, which the compiler vectorises (neither a floating-point comparison nor Eigen's
+  // bool-to-double cast is); the product keeps NaN and signed zeros.
   template <typename ABlock, typename HBlock>
   static void MultiplyByReluDerivative(ABlock&& abar, const HBlock& h) {
     const Eigen::Index rows = abar.rows();
     for (Eigen::Index c = 0; c < abar.cols(); ++c) {
       B* __restrict a = abar.col(c).data();
       const B* __restrict x = h.col(c).data();
-      for (Eigen::Index r = 0; r < rows; ++r) a[r] *= x[r] > B(0) ? B(1) : B(0);
+      for (Eigen::Index r = 0; r < rows; ++r) a[r] *= internal::PositiveIndicator(x[r]);
     }
   }
 
