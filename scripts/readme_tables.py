@@ -25,7 +25,8 @@ column name is its value (a number where it parses as one); with several, a
 list of the values, for median, mean, min, max, sum, len; at(values, column,
 value, ...) is the entry of the one row whose columns equal the values (a grid
 cell: at(val_loss, hidden, 32)); pick(values, column, value, ...) the entries of
-all such rows. sci(x, digits=3) writes 1.38e-4.
+all such rows. sci(x, digits=3) writes 1.38e-4. wilson(successes, trials) is the
+Wilson 95 % interval (low, high) of a success rate, as diffdyn::WilsonInterval.
 
 A number in running text is tied to its results the same way, by a comment
 right after it:
@@ -104,8 +105,18 @@ def at(values, *keys_and_values):
     return found[0]
 
 
+def wilson(successes, trials, z=1.96):
+    """The Wilson score interval (low, high) of successes / trials (95 % for z = 1.96), the
+    formula of diffdyn::WilsonInterval (solvers/statistics.h)."""
+    n, p = float(trials), successes / trials
+    denom = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
 FUNCTIONS = {
-    "at": at, "pick": pick,
+    "at": at, "pick": pick, "wilson": wilson,
     "median": statistics.median, "mean": statistics.fmean, "min": min, "max": max,
     "sum": sum, "len": len, "sci": sci, "round": round, "abs": abs,
 }

@@ -2,12 +2,10 @@
 """scripts/readme_tables.py on a README it writes itself: a table or an inline
 number that agrees passes; a changed result fails with a diff; --write repairs
 it; bad specs exit 2."""
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "readme_tables.py"
+from script_check import expect, run_script
 
 README = """# Results
 
@@ -35,13 +33,7 @@ CSV = "model,seed,err\na,0,0.000138005\na,1,0.0002\na,2,0.0003\nb,7,0.25\n"
 
 
 def run(*args):
-    return subprocess.run([sys.executable, str(SCRIPT), *args], capture_output=True, text=True)
-
-
-def expect(cond, what):
-    if not cond:
-        print(f"FAILED: {what}")
-        sys.exit(1)
+    return run_script("readme_tables.py", *args)
 
 
 def main():
@@ -75,6 +67,17 @@ def main():
         scores.write_text(CSV)
         r = run("--check", str(readme))
         expect(r.returncode == 0, f"rows of a second CSV are found (rc {r.returncode}: {r.stderr})")
+
+        # wilson(): the pooled interval of several rows, as diffdyn::WilsonInterval gives it
+        # (197 of 200: [95.7, 99.5] %, the 95 % interval of solvers/statistics.h).
+        (root / "results" / "trials.csv").write_text("seed,trials,successes\n1,50,50\n4,50,48\n5,100,99\n")
+        pooled = ("<!-- table from results/trials.csv\n| seeds | interval |\n|---|---|\n"
+                  "seed=*: | all | [{100 * wilson(sum(successes), sum(trials))[0]:.1f}, "
+                  "{100 * wilson(sum(successes), sum(trials))[1]:.1f}] % |\n-->\n"
+                  "| seeds | interval |\n|---|---|\n| all | [95.7, 99.5] % |\n<!-- end table -->\n")
+        readme.write_text(pooled)
+        r = run("--check", str(readme))
+        expect(r.returncode == 0, f"wilson() gives the pooled interval (rc {r.returncode}: {r.stderr})")
 
         for bad, message in [
             (README.replace("model=b:", "model=c:"), "no CSV row matches"),
