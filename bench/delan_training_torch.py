@@ -24,7 +24,7 @@ import os
 
 import torch
 
-from torch_common import describe_torch, ours_best, reference_beside_ours, time_it
+from torch_common import describe_torch, ours_best, reference_beside_ours, repo_path, time_it
 
 BATCH = 512
 WIDTH = 64
@@ -117,8 +117,7 @@ def measure(torch_threads):
     """Median epoch seconds per precision with torch on torch_threads (the process's
     OPENBLAS_NUM_THREADS set by fastest_two_core)."""
     describe_torch(torch_threads)
-    # The data path is relative to the repository root (this script runs in bench/).
-    path = DATA if os.path.isabs(DATA) else os.path.join("..", DATA)
+    path = repo_path(DATA)
     data = read_characters(path)
     return {f"{name}/delan_epoch": time_epochs(data, dtype)
             for name, dtype in (("float64", torch.float64), ("float32", torch.float32))}
@@ -139,7 +138,7 @@ def main():
         return
     args, by_config, best, path = run
     # One iteration of ours is 50 epochs: its counter epoch_s is the time per epoch.
-    ours = ours_best(path, precision_of, lambda run: run["epoch_s"])
+    ours = ours_best(path, precision_of, lambda r: r["epoch_s"])
     summary = {}
     for precision, (seconds, name) in sorted(ours.items()):
         torch_s = best[f"{precision}/delan_epoch"]["seconds"]

@@ -22,7 +22,7 @@ import re
 import torch
 
 from torch_common import (describe_torch, ours_best, read_transitions, reference_beside_ours,
-                          rk4_38_flow, se2_pose_loss, time_it)
+                          repo_path, rk4_38_flow, se2_pose_loss, time_it)
 
 TRANSITIONS = 1000
 BATCH = 500
@@ -56,8 +56,7 @@ def epoch(model, opt, x, u, y, gen):
 def measure(torch_threads):
     """Median wall seconds of one epoch per precision, with torch on torch_threads."""
     describe_torch(torch_threads)
-    # The data path is relative to the repository root (this script runs in bench/).
-    path = DATA if os.path.isabs(DATA) else os.path.join("..", DATA)
+    path = repo_path(DATA)
     data = read_transitions(path, TRANSITIONS)
     result = {}
     for name, dtype in (("float64", torch.float64), ("float32", torch.float32)):

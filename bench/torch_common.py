@@ -174,3 +174,9 @@ def reference_beside_ours(script, measure, ours_name):
     path or None)."""
     run = two_core_reference(script, measure)
     return None if run is None else (*run, ours_next_to(run[0].out, ours_name))
+
+
+def repo_path(path):
+    """A path given relative to the repository root, as seen from bench/ (where
+    fastest_two_core runs the references); absolute paths are kept."""
+    return path if os.path.isabs(path) else os.path.join("..", path)

@@ -253,9 +253,6 @@ inline void VectorizedTanh(const S* x, Eigen::Index n, S* t) {
 
 namespace internal {
 
-// For m values z = p a[i] (m <= 64): e[i] = exp(-|z|) in (0, 1] and
-// s[i] = sigmoid(z) = 1 / (1 + exp(-z)), as 1 / (1 + e) for z >= 0 and
-// e / (1 + e) otherwise: no overflow, one division. e and s must not alias a.
 // The unsigned integer of S's size, for choices made on a value's bits: GCC does not
 // vectorise a floating-point comparison under -ftrapping-math (its default), nor does
 // Eigen 3.4 vectorise select, while integer comparisons and masks vectorise.
