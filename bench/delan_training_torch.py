@@ -24,7 +24,8 @@ import os
 
 import torch
 
-from torch_common import describe_torch, ours_best, reference_beside_ours, repo_path, time_it
+from torch_common import (describe_torch, ours_best, reference_beside_ours, repo_path, time_it,
+                          write_comparison_csv)
 
 BATCH = 512
 WIDTH = 64
@@ -139,9 +140,10 @@ def main():
     args, by_config, best, path = run
     # One iteration of ours is 50 epochs: its counter epoch_s is the time per epoch.
     ours = ours_best(path, precision_of, lambda r: r["epoch_s"])
-    summary = {}
+    summary, rows = {}, []
     for precision, (seconds, name) in sorted(ours.items()):
         torch_s = best[f"{precision}/delan_epoch"]["seconds"]
+        rows.append(("delan_epoch", precision, name, seconds, best[f"{precision}/delan_epoch"]["config"], torch_s))
         print(f"{precision}: ours {name} {seconds * 1e3:.2f} ms per epoch, PyTorch best "
               f"{torch_s * 1e3:.2f} ms ({best[f'{precision}/delan_epoch']['config']}), "
               f"ours / PyTorch = {seconds / torch_s:.2f}x")
@@ -149,6 +151,7 @@ def main():
                               "ours_over_torch": seconds / torch_s}
     with open(args.out, "w") as f:
         json.dump({"by_config": by_config, "best": best, "summary": summary}, f, indent=1)
+    write_comparison_csv(args.out, rows)
 
 
 if __name__ == "__main__":

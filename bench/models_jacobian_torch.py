@@ -17,7 +17,7 @@ import sys
 
 import torch
 
-from torch_common import describe_torch, ours_best, time_it, two_core_reference
+from torch_common import describe_torch, ours_best, time_it, two_core_reference, write_comparison_csv
 
 BATCH = 1000
 
@@ -116,6 +116,8 @@ def main():
         json.dump({"by_config": by_config, "best": best,
                    "ours_over_torch": {p: ours[p][0] / torch_best[p][0]
                                        for p in ours if p in torch_best}}, f, indent=1)
+    write_comparison_csv(args.out, [("input_jacobians_1000", p, ours[p][1], ours[p][0], torch_best[p][2],
+                                     torch_best[p][0]) for p in sorted(ours) if p in torch_best])
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ import sys
 
 import torch
 
-from torch_common import describe_torch, rk4_38_flow, time_it, two_core_reference
+from torch_common import describe_torch, rk4_38_flow, time_it, two_core_reference, write_comparison_csv
 
 K = 1000
 START = (0.4, 0.0, -0.2 * math.pi)
@@ -185,15 +185,18 @@ def main():
     args, by_config, best = run
     ours_path = os.path.join(os.path.dirname(os.path.abspath(args.out or "x")), "mppi_pushing.json")
     ours = ours_two_threads(ours_path) if os.path.exists(ours_path) else {}
-    ratios = {}
+    ratios, rows = {}, []
     for key, entry in best.items():
         if key in ours:
             ratios[key] = ours[key] / entry["seconds"]
+            precision, workload = key.split("/")
+            rows.append((workload, precision, "two threads", ours[key], entry["config"], entry["seconds"]))
             print(f"MPPI {key}, K = {K}: ours (2 threads) {ours[key] * 1e3:.1f} ms, PyTorch best "
                   f"({entry['config']}) {entry['seconds'] * 1e3:.1f} ms; ours / PyTorch = {ratios[key]:.2f}x")
     if args.out:
         with open(args.out, "w") as f:
             json.dump({"by_config": by_config, "best": best, "ours_over_torch": ratios}, f, indent=1)
+        write_comparison_csv(args.out, rows)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ import re
 
 import torch
 
-from torch_common import (describe_torch, ours_best, read_transitions, reference_beside_ours,
+from torch_common import (describe_torch, write_comparison_csv, ours_best, read_transitions, reference_beside_ours,
                           repo_path, rk4_38_flow, se2_pose_loss, time_it)
 
 TRANSITIONS = 1000
@@ -93,9 +93,11 @@ def main():
         runs = json.load(f)["benchmarks"]
     peaks = {"float64": peak_of(runs, "BM_PeakDgemmOpenBlas2Threads"),
              "float32": peak_of(runs, "BM_PeakSgemmOpenBlas2Threads")}
-    summary = {}
+    summary, rows = {}, []
     for precision, (seconds, name) in sorted(ours.items()):
         torch_s = best[f"{precision}/epoch_abs_node_rk4"]["seconds"]
+        rows.append(("epoch_abs_node_rk4", precision, name, seconds,
+                     best[f"{precision}/epoch_abs_node_rk4"]["config"], torch_s))
         run = next(r for r in runs if r["name"] == name)
         rate = run.get("epoch_flops_G", 0.0) / seconds
         peak = peaks[precision]
@@ -110,6 +112,7 @@ def main():
                               "peak_gflops": peak}
     with open(args.out, "w") as f:
         json.dump({"by_config": by_config, "best": best, "summary": summary}, f, indent=1)
+    write_comparison_csv(args.out, rows)
 
 
 if __name__ == "__main__":

@@ -180,3 +180,45 @@ def repo_path(path):
     """A path given relative to the repository root, as seen from bench/ (where
     fastest_two_core runs the references); absolute paths are kept."""
     return path if os.path.isabs(path) else os.path.join("..", path)
+
+
+def describe_machine():
+    """'<CPU model> (N cores, AVX-512|AVX2|baseline ISA)', as diffdyn figures writes it."""
+    model, isa = "unknown CPU", "baseline ISA"
+    with open("/proc/cpuinfo") as f:
+        for line in f:
+            key, _, value = line.partition(":")
+            key, value = key.strip(), value.strip()
+            if key == "model name" and model == "unknown CPU":
+                model = value
+            if key == "flags" and isa == "baseline ISA":
+                flags = set(value.split())
+                isa = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "baseline ISA"
+    return f"{model} ({os.cpu_count()} cores, {isa})"
+
+
+COMPARISON_COLUMNS = ["workload", "precision", "ours_benchmark", "ours_ms", "torch_config", "torch_ms",
+                      "ours_over_torch", "machine", "date"]
+
+
+def write_comparison_csv(out, rows):
+    """Writes the run's comparisons next to the reference's JSON `out` (same name,
+    .csv): one row per (workload, precision: f64 or f32) with our time, PyTorch's best
+    two-core time and configuration, their ratio, the machine and the UTC date.
+    `rows` holds (workload, precision, ours benchmark name, ours seconds, torch
+    config, torch seconds). The figures page (paper_figures/figures.json) cites
+    these CSVs as stored under bench/results/."""
+    if not out:
+        return None
+    path = os.path.splitext(out)[0] + ".csv"
+    machine = describe_machine()
+    short = {"float64": "f64", "double": "f64", "float32": "f32", "float": "f32"}
+    date = time.strftime("%Y-%m-%d", time.gmtime())
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(COMPARISON_COLUMNS)
+        for workload, precision, name, ours_s, config, torch_s in rows:
+            w.writerow([workload, short.get(precision, precision), name, f"{ours_s * 1e3:.6g}", config, f"{torch_s * 1e3:.6g}",
+                        f"{ours_s / torch_s:.4g}", machine, date])
+    print(f"comparison written to {path}")
+    return path

@@ -4,16 +4,20 @@
 //
 //   diffdyn figures --quick --out figs            # every figure at small sizes (minutes)
 //   diffdyn figures --only hjb_pendulum --out figs
+//   diffdyn figures --stored --out figs           # the stored full runs' page, nothing run
 //
 // Figure NAME writes into DIR/NAME/; its program's stdout and stderr go to
 // DIR/tasks/<i>/. Under `mpirun -np N diffdyn figures ...` the figures run on the
 // ranks (as `diffdyn sweep` does) and rank 0 writes the page. The figures to run, their arguments and the numbers the page
 // shows come from paper_figures/figures.json. With --resume, a figure whose
-// run is recorded in DIR with the same arguments is not run again.
+// run is recorded in DIR with the same arguments is not run again. Speed rows
+// (ours beside PyTorch) come from the stored benchmark comparisons of bench/results/,
+// copied to DIR/bench/.
 #include <algorithm>
 #include <chrono>
 #include <ctime>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <set>
 #include <stdexcept>
@@ -39,9 +43,11 @@ struct FiguresOptions {
   std::string manifest = DIFFDYN_FIGURE_MANIFEST;
   std::string programs = DIFFDYN_FIGURE_PROGRAMS;
   std::string data = DIFFDYN_SHARED_DATA;
+  std::string bench_results = DIFFDYN_BENCH_RESULTS;
   int workers = 1;
   bool quick = false;
   bool resume = false;
+  bool stored = false;
   bool json = false;
   bool quiet = false;
 };
@@ -130,13 +136,118 @@ std::string Invocation(const FiguresOptions& o) {
   if (!o.only.empty()) text += " --only " + ShellQuote(o.only);
   if (o.workers != defaults.workers) text += fmt::format(" --workers {}", o.workers);
   if (o.resume) text += " --resume";
+  if (o.stored) text += " --stored";
   if (o.manifest != defaults.manifest) text += " --manifest " + ShellQuote(o.manifest);
   if (o.programs != defaults.programs) text += " --programs " + ShellQuote(o.programs);
   if (o.data != defaults.data) text += " --data " + ShellQuote(o.data);
+  if (o.bench_results != defaults.bench_results) text += " --bench-results " + ShellQuote(o.bench_results);
   return text + " --out " + ShellQuote(o.out);
 }
 
+// Copies the stored benchmark comparisons the figures cite into DIR/bench/ (a
+// missing one is left for the page to name).
+void CopyBenchResults(const std::vector<const FigureEntry*>& figures, const FiguresOptions& o) {
+  for (const FigureEntry* e : figures) {
+    for (const FigureNumber& n : e->numbers) {
+      const fs::path from = fs::path(o.bench_results) / n.csv, to = fs::path(o.out) / "bench" / n.csv;
+      if (!n.bench || !fs::is_regular_file(from)) continue;
+      fs::create_directories(to.parent_path());
+      fs::copy_file(from, to, fs::copy_options::overwrite_existing);
+    }
+  }
+}
+
+// The first line of `path` (a stored CSV part).
+std::string HeaderOf(const fs::path& path) {
+  std::ifstream in(path);
+  std::string line;
+  DIFFDYN_CHECK(in.good() && std::getline(in, line), path.string(), ": cannot read its header");
+  return line;
+}
+
+// Every part of a stored CSV has the first part's header (checked before anything is written).
+void CheckStoredParts(const std::vector<const FigureEntry*>& figures, const fs::path& root) {
+  for (const FigureEntry* e : figures) {
+    for (const auto& [file, parts] : e->stored.parts) {
+      const fs::path folder = root / e->stored.folder;
+      const std::string header = HeaderOf(folder / parts[0]);
+      for (const std::string& part : parts) {
+        DIFFDYN_CHECK(HeaderOf(folder / part) == header, (folder / part).string(), ": its header differs from ",
+                      parts[0], "'s (", file, " is stored in parts)");
+      }
+    }
+  }
+}
+
+// Writes `to` from the stored `parts`: the first part whole, the others without their header.
+void JoinParts(const fs::path& folder, const std::vector<std::string>& parts, const fs::path& to) {
+  WriteFileAtomically(to, [&](std::ostream& out) {
+    for (std::size_t i = 0; i < parts.size(); ++i) {
+      std::ifstream in(folder / parts[i]);
+      std::string line;
+      for (bool header = true; std::getline(in, line); header = false) {
+        if (!header || i == 0) out << line << '\n';
+      }
+    }
+  });
+}
+
+// The figures' stored full runs (manifest key "stored") copied into DIR/NAME/:
+// the listed PNGs and CSVs, a CSV stored in parts joined. A figure without a
+// stored run, or missing files, is left for the page to name.
+std::vector<FigureRun> CopyStoredRuns(const std::vector<const FigureEntry*>& figures, const FiguresOptions& o) {
+  const fs::path root = fs::path(o.manifest).parent_path();
+  std::vector<FigureRun> runs;
+  for (const FigureEntry* e : figures) {
+    FigureRun run{e, "", 0, 0, "", "none stored"};
+    run.command = ShellQuote((fs::path(o.programs) / e->program).string());
+    for (const std::string& arg : e->full_args) run.command += " " + ShellQuote(Substitute(arg, o.data));
+    if (!e->stored.folder.empty()) {
+      const fs::path from = root / e->stored.folder, to = fs::path(o.out) / e->name;
+      run.stored = "paper_figures/" + e->stored.folder;
+      run.command += " --out " + ShellQuote(run.stored) + " --plot";
+      fs::create_directories(to);
+      for (const std::vector<std::string>* list : {&e->images, &e->files}) {
+        for (const std::string& file : *list) {
+          const auto parts = std::find_if(e->stored.parts.begin(), e->stored.parts.end(),
+                                          [&](const auto& p) { return p.first == file; });
+          if (parts != e->stored.parts.end()) {
+            JoinParts(from, parts->second, to / file);
+          } else if (fs::is_regular_file(from / file)) {
+            fs::create_directories((to / file).parent_path());
+            fs::copy_file(from / file, to / file, fs::copy_options::overwrite_existing);
+          }
+        }
+      }
+    }
+    runs.push_back(std::move(run));
+  }
+  return runs;
+}
+
+// --stored: the page from the stored full runs, nothing run.
+void WriteStoredPage(const FiguresOptions& o, const std::string& invocation) {
+  const auto start = std::chrono::steady_clock::now();
+  const std::vector<FigureEntry> manifest = ReadFigureManifest(o.manifest);
+  const std::vector<const FigureEntry*> figures = Select(manifest, o.only);
+  const fs::path page = fs::path(o.out) / "index.html";
+  CheckOutputPath(page);
+  CheckStoredParts(figures, fs::path(o.manifest).parent_path());
+  const std::vector<FigureRun> runs = CopyStoredRuns(figures, o);
+  CopyBenchResults(figures, o);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  PageInfo info{false, true, DescribeMachine(), UtcNow(), invocation, seconds};
+  WriteFiguresPage(page, runs, info);
+  if (o.json) {
+    PrintJson({{"figures", figures.size()}, {"done", figures.size()}, {"failed", 0}, {"seconds", seconds},
+               {"index_path", page.string()}});
+  } else {
+    fmt::print("{} stored figure{}; page: {}\n", figures.size(), figures.size() == 1 ? "" : "s", page.string());
+  }
+}
+
 void RunFigures(const FiguresOptions& o, const std::string& invocation) {
+  if (o.stored) return WriteStoredPage(o, invocation);
   const auto start = std::chrono::steady_clock::now();
   const std::vector<FigureEntry> manifest = ReadFigureManifest(o.manifest);
   const std::vector<const FigureEntry*> figures = Select(manifest, o.only);
@@ -169,11 +280,12 @@ void RunFigures(const FiguresOptions& o, const std::string& invocation) {
   std::vector<std::string> failed;
   for (std::size_t i = 0; i < figures.size(); ++i) {
     const SweepResult& r = queue.Results()[i];
-    runs.push_back({figures[i], CommandText(tasks[i]), r.exit_code, r.seconds, fmt::format("tasks/{}", i)});
+    runs.push_back({figures[i], CommandText(tasks[i]), r.exit_code, r.seconds, fmt::format("tasks/{}", i), ""});
     if (r.exit_code != 0) failed.push_back(figures[i]->name);
   }
+  CopyBenchResults(figures, o);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  WriteFiguresPage(page, runs, {o.quick, DescribeMachine(), UtcNow(), invocation, seconds});
+  WriteFiguresPage(page, runs, {o.quick, false, DescribeMachine(), UtcNow(), invocation, seconds});
   if (!failed.empty()) {
     std::string names;
     for (const std::string& n : failed) names += (names.empty() ? "" : ", ") + n;
@@ -204,9 +316,16 @@ void RegisterFiguresCommand(CLI::App& app) {
       ->check(Bounded(1, 64))
       ->capture_default_str();
   command->add_flag("--resume", o->resume, "Keep the figures already recorded in --out with the same arguments");
+  command->add_flag("--stored", o->stored,
+                    "Run nothing: the page from the full runs stored under paper_figures/ (manifest key 'stored')")
+      ->excludes("--quick")
+      ->excludes("--resume");
   command->add_option("--manifest", o->manifest, "The figures and their numbers")->check(InputPath())->capture_default_str();
   command->add_option("--programs", o->programs, "Folder of the figure_* programs")->capture_default_str();
   command->add_option("--data", o->data, "The shared data folder ({data} in the manifest)")->capture_default_str();
+  command->add_option("--bench-results", o->bench_results,
+                      "Folder of the stored benchmark comparisons the page cites (copied to DIR/bench/)")
+      ->capture_default_str();
   command->add_flag("--json", o->json, "Print a one-line JSON summary on stdout");
   command->add_flag("--quiet", o->quiet, "No progress lines");
   command->callback([o] {

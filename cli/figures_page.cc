@@ -76,6 +76,11 @@ FigureNumber ReadNumber(const json& j, const std::string& where) {
       n.where.emplace_back(column, value.get<std::string>());
     }
   }
+  if (j.contains("bench")) {
+    DIFFDYN_CHECK(j["bench"].is_boolean(), where, ": 'bench' must be true or false");
+    n.bench = j["bench"].get<bool>();
+  }
+  n.pytorch_column = Text(j, "pytorch_column", where, /*required=*/false);
   n.reference = Number(j, "reference", where);
   n.reference_source = Text(j, "reference_source", where, /*required=*/false);
   if (j.contains("accept")) {
@@ -85,9 +90,34 @@ FigureNumber ReadNumber(const json& j, const std::string& where) {
     n.max = Number(a, "max", where);
     n.min_ratio = Number(a, "min_ratio", where);
     n.max_ratio = Number(a, "max_ratio", where);
+    n.max_pytorch_ratio = Number(a, "max_pytorch_ratio", where);
     DIFFDYN_CHECK(n.reference || !(n.min_ratio || n.max_ratio), where, ": a ratio bound needs a 'reference'");
+    DIFFDYN_CHECK(!n.pytorch_column.empty() || !n.max_pytorch_ratio, where,
+                  ": 'max_pytorch_ratio' needs a 'pytorch_column'");
   }
   return n;
+}
+
+// {"folder": F, "parts": {"file": ["part", ...]}}: F and the parts inside the manifest's folder.
+StoredRun ReadStored(const json& j, const std::string& where) {
+  DIFFDYN_CHECK(j.is_object(), where, ": must be an object");
+  StoredRun stored;
+  stored.folder = Text(j, "folder", where);
+  CheckInside(stored.folder, where);
+  if (!j.contains("parts")) return stored;
+  DIFFDYN_CHECK(j["parts"].is_object(), where, ": 'parts' must be an object of arrays of strings");
+  for (const auto& [file, parts] : j["parts"].items()) {
+    CheckInside(file, where);
+    DIFFDYN_CHECK(parts.is_array() && !parts.empty(), where, ": '", file, "' needs an array of parts");
+    std::vector<std::string> names;
+    for (const json& part : parts) {
+      DIFFDYN_CHECK(part.is_string(), where, ": the parts of '", file, "' must be strings");
+      names.push_back(part.get<std::string>());
+      CheckInside(names.back(), where);
+    }
+    stored.parts.emplace_back(file, std::move(names));
+  }
+  return stored;
 }
 
 FigureEntry ReadEntry(const json& j, const std::string& where) {
@@ -115,6 +145,7 @@ FigureEntry ReadEntry(const json& j, const std::string& where) {
   for (std::size_t i = 0; i < j["numbers"].size(); ++i) {
     e.numbers.push_back(ReadNumber(j["numbers"][i], StrCat(here, ": numbers[", i, "]")));
   }
+  if (j.contains("stored")) e.stored = ReadStored(j["stored"], StrCat(here, ": stored"));
   return e;
 }
 
@@ -153,8 +184,9 @@ std::vector<std::string> SplitCsvLine(const std::string& line) {
   return cells;
 }
 
-// The `column` cells of the rows matching `where`; sets `problem` on failure.
-std::vector<std::string> MatchingCells(const FigureNumber& n, const fs::path& path, std::string& problem) {
+// The `column` cells of the rows matching n.where; sets `problem` on failure.
+std::vector<std::string> MatchingCells(const FigureNumber& n, const std::string& column_name, const fs::path& path,
+                                       std::string& problem) {
   std::ifstream in(path);
   std::string line;
   if (!in.good() || !std::getline(in, line)) {
@@ -166,7 +198,7 @@ std::vector<std::string> MatchingCells(const FigureNumber& n, const fs::path& pa
     const auto it = std::find(header.begin(), header.end(), name);
     return it == header.end() ? -1 : it - header.begin();
   };
-  const std::ptrdiff_t column = index_of(n.column);
+  const std::ptrdiff_t column = index_of(column_name);
   std::vector<std::pair<std::ptrdiff_t, std::string>> filters;
   for (const auto& [name, value] : n.where) filters.emplace_back(index_of(name), value);
   if (column < 0 || std::any_of(filters.begin(), filters.end(), [](const auto& f) { return f.first < 0; })) {
@@ -197,6 +229,30 @@ double Reduce(const std::string& how, std::vector<double> v) {
   return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);  // median
 }
 
+// `reduce` over `column` of the rows of n.csv under `folder` matching n.where;
+// nothing (and `problem` set) without exactly the rows and finite cells it needs.
+std::optional<double> ReducedColumn(const FigureNumber& n, const std::string& column, const fs::path& folder,
+                                    std::size_t& rows, std::string& problem) {
+  const std::vector<std::string> cells = MatchingCells(n, column, folder / n.csv, problem);
+  if (!problem.empty()) return std::nullopt;
+  rows = cells.size();
+  if (cells.empty() || (n.reduce == "value" && cells.size() != 1)) {
+    problem = fmt::format("{} matching rows", cells.size());
+    return std::nullopt;
+  }
+  std::vector<double> values;
+  for (const std::string& cell : cells) {
+    char* end = nullptr;
+    const double v = std::strtod(cell.c_str(), &end);
+    if (cell.empty() || *end != '\0' || !std::isfinite(v)) {
+      problem = "a cell is not a finite number";
+      return std::nullopt;
+    }
+    values.push_back(v);
+  }
+  return Reduce(n.reduce, std::move(values));
+}
+
 // ---------------------------------------------------------------------------
 // HTML.
 
@@ -222,6 +278,7 @@ std::string AcceptText(const FigureNumber& n) {
   if (n.max) parts.push_back("≤ " + Format(*n.max));
   if (n.min_ratio) parts.push_back("ratio ≥ " + Format(*n.min_ratio));
   if (n.max_ratio) parts.push_back("ratio ≤ " + Format(*n.max_ratio));
+  if (n.max_pytorch_ratio) parts.push_back("ours / PyTorch ≤ " + Format(*n.max_pytorch_ratio));
   std::string out;
   for (std::size_t i = 0; i < parts.size(); ++i) out += (i ? ", " : "") + parts[i];
   return out.empty() ? "none set" : out;
@@ -235,24 +292,37 @@ std::string WhereText(const FigureNumber& n) {
   return out;
 }
 
+// A number cell with its recipe as data attributes (class "ours" or "pytorch").
+std::string RecipeCell(const char* css, const std::string& csv, const FigureNumber& n, const std::string& column,
+                       const std::optional<double>& value, const std::string& problem) {
+  return fmt::format("<td class=\"{}\" data-csv=\"{}\" data-where=\"{}\" data-column=\"{}\" data-reduce=\"{}\">{}</td>",
+                     css, Escape(csv), Escape(WhereText(n)), Escape(column), n.reduce,
+                     value ? Format(*value) : "missing: " + Escape(problem));
+}
+
+std::string RatioText(const std::optional<double>& a, const std::optional<double>& b) {
+  return a && b && *b != 0 ? fmt::format("{:.3g}", *a / *b) : "-";
+}
+
 void WriteNumberRow(std::ostream& html, const FigureEntry& e, const FigureNumber& n, const NumberValue& v,
                     const fs::path& root) {
-  const std::string csv = e.name + "/" + n.csv;
-  html << "<tr><td>" << Escape(n.label) << "</td>";
-  html << "<td class=\"ours\" data-csv=\"" << Escape(csv) << "\" data-where=\"" << Escape(WhereText(n))
-       << "\" data-column=\"" << Escape(n.column) << "\" data-reduce=\"" << n.reduce << "\">"
-       << (v.value ? Format(*v.value) : "missing: " + Escape(v.problem)) << "</td>";
+  const std::string csv = NumberFolder(e, n) + "/" + n.csv;
+  html << "<tr><td>" << Escape(n.label) << "</td>" << RecipeCell("ours", csv, n, n.column, v.value, v.problem);
   html << "<td>" << (n.reference ? Format(*n.reference) : "-") << "</td><td>" << Escape(n.reference_source)
-       << "</td>";
-  const bool ratio = v.value && n.reference && *n.reference != 0;
-  html << "<td>" << (ratio ? fmt::format("{:.3g}", *v.value / *n.reference) : "-") << "</td>";
+       << "</td><td>" << RatioText(v.value, n.reference) << "</td>";
+  if (n.pytorch_column.empty()) {
+    html << "<td>-</td><td>-</td>";
+  } else {
+    html << RecipeCell("pytorch", csv, n, n.pytorch_column, v.pytorch, "no value") << "<td>"
+         << RatioText(v.value, v.pytorch) << "</td>";
+  }
   const std::string verdict = Verdict(n, v);
   html << "<td>" << AcceptText(n) << "</td><td class=\"" << (verdict == "meets" ? "ok" : verdict == "misses" ? "bad" : "")
        << "\">" << verdict << "</td>";
   html << "<td>" << (fs::is_regular_file(root / csv) ? "<a href=\"" + Escape(csv) + "\">" + Escape(n.csv) + "</a>"
                                                      : Escape(n.csv))
        << " " << n.reduce << " of " << Escape(n.column) << (n.where.empty() ? "" : " where " + Escape(WhereText(n)))
-       << "</td></tr>\n";
+       << (v.measured.empty() ? "" : "; benchmark run on " + Escape(v.measured)) << "</td></tr>\n";
 }
 
 void WriteFigure(std::ostream& html, const FigureRun& run, const std::vector<NumberValue>& values,
@@ -260,10 +330,15 @@ void WriteFigure(std::ostream& html, const FigureRun& run, const std::vector<Num
   const FigureEntry& e = *run.entry;
   html << "<section id=\"" << e.name << "\">\n<h2>" << Escape(e.paper) << ": " << Escape(e.title) << "</h2>\n";
   html << "<p>" << Escape(e.caption) << "</p>\n";
-  html << "<p class=\"run\">Command: <code>" << Escape(run.command) << "</code><br>Wall time "
-       << fmt::format("{:.1f}", run.seconds) << " s, exit code " << run.exit_code << ". Logs: <a href=\""
-       << Escape(run.log_dir) << "/stdout.txt\">stdout</a>, <a href=\"" << Escape(run.log_dir)
-       << "/stderr.txt\">stderr</a>. Full run: " << Escape(e.full_time) << "."
+  html << "<p class=\"run\">Command: <code>" << Escape(run.command) << "</code><br>";
+  if (run.log_dir.empty()) {
+    html << "Stored full run: " << Escape(run.stored) << " (not rerun here; its README gives the date and machine).";
+  } else {
+    html << "Wall time " << fmt::format("{:.1f}", run.seconds) << " s, exit code " << run.exit_code
+         << ". Logs: <a href=\"" << Escape(run.log_dir) << "/stdout.txt\">stdout</a>, <a href=\""
+         << Escape(run.log_dir) << "/stderr.txt\">stderr</a>.";
+  }
+  html << " Full run: " << Escape(e.full_time) << "."
        << (e.readme.empty() ? "" : " Details: paper_figures/" + Escape(e.readme) + ".") << "</p>\n<div class=\"pngs\">\n";
   for (const std::string& image : e.images) {
     const std::string rel = e.name + "/" + image;
@@ -281,7 +356,7 @@ void WriteFigure(std::ostream& html, const FigureRun& run, const std::vector<Num
                                              : Escape(file) + " (not produced) ");
   }
   html << "</p>\n<table>\n<tr><th>quantity</th><th>ours</th><th>reference</th><th>source</th>"
-          "<th>ours / reference</th><th>acceptance</th><th>verdict</th><th>from</th></tr>\n";
+          "<th>ours / reference</th><th>PyTorch (bench/, same run)</th><th>ours / PyTorch</th><th>acceptance</th><th>verdict</th><th>from</th></tr>\n";
   for (std::size_t i = 0; i < e.numbers.size(); ++i) WriteNumberRow(html, e, e.numbers[i], values[i], root);
   html << "</table>\n</section>\n";
 }
@@ -302,38 +377,35 @@ std::vector<FigureEntry> ParseFigureManifest(std::string_view text, const std::s
   return FiguresFromJson(ParseJsonText(text, name), name);
 }
 
+std::string NumberFolder(const FigureEntry& figure, const FigureNumber& number) {
+  return number.bench ? "bench" : figure.name;
+}
+
 NumberValue EvaluateFigureNumber(const FigureNumber& number, const fs::path& figure_dir) {
   NumberValue out;
-  const std::vector<std::string> cells = MatchingCells(number, figure_dir / number.csv, out.problem);
-  if (!out.problem.empty()) return out;
-  out.rows = cells.size();
-  if (cells.empty() || (number.reduce == "value" && cells.size() != 1)) {
-    out.problem = fmt::format("{} matching rows", cells.size());
-    return out;
-  }
-  std::vector<double> values;
-  for (const std::string& cell : cells) {
-    char* end = nullptr;
-    const double v = std::strtod(cell.c_str(), &end);
-    if (cell.empty() || *end != '\0' || !std::isfinite(v)) {
-      out.problem = "a cell is not a finite number";
-      return out;
-    }
-    values.push_back(v);
-  }
-  out.value = Reduce(number.reduce, std::move(values));
+  out.value = ReducedColumn(number, number.column, figure_dir, out.rows, out.problem);
+  if (!out.value || number.pytorch_column.empty()) return out;
+  std::size_t rows = 0;
+  std::string problem;
+  out.pytorch = ReducedColumn(number, number.pytorch_column, figure_dir, rows, problem);
+  // The benchmark run's machine and date, when the CSV has them.
+  std::string none;
+  const std::vector<std::string> machine = MatchingCells(number, "machine", figure_dir / number.csv, none);
+  const std::vector<std::string> date = MatchingCells(number, "date", figure_dir / number.csv, none);
+  if (none.empty() && !machine.empty() && !date.empty()) out.measured = machine.front() + ", " + date.front();
   return out;
 }
 
 std::string Verdict(const FigureNumber& n, const NumberValue& v) {
   if (!v.value) return "missing";
-  if (!n.min && !n.max && !n.min_ratio && !n.max_ratio) return "not judged";
+  if (!n.min && !n.max && !n.min_ratio && !n.max_ratio && !n.max_pytorch_ratio) return "not judged";
   const double x = *v.value;
   bool ok = (!n.min || x >= *n.min) && (!n.max || x <= *n.max);
   if (n.reference && *n.reference != 0) {
     const double r = x / *n.reference;
     ok = ok && (!n.min_ratio || r >= *n.min_ratio) && (!n.max_ratio || r <= *n.max_ratio);
   }
+  if (n.max_pytorch_ratio) ok = ok && v.pytorch && *v.pytorch > 0 && x / *v.pytorch <= *n.max_pytorch_ratio;
   return ok ? "meets" : "misses";
 }
 
@@ -365,7 +437,7 @@ void WriteFiguresPage(const fs::path& path, const std::vector<FigureRun>& runs, 
   for (std::size_t r = 0; r < runs.size(); ++r) {
     failed += runs[r].exit_code != 0;
     for (const FigureNumber& n : runs[r].entry->numbers) {
-      values[r].push_back(EvaluateFigureNumber(n, root / runs[r].entry->name));
+      values[r].push_back(EvaluateFigureNumber(n, root / NumberFolder(*runs[r].entry, n)));
       const std::string v = Verdict(n, values[r].back());
       judged += v == "meets" || v == "misses";
       if (v == "misses") misses.push_back(runs[r].entry->paper + ": " + n.label);
@@ -375,9 +447,12 @@ void WriteFiguresPage(const fs::path& path, const std::vector<FigureRun>& runs, 
     html << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
             "<title>diffdyn: the figures of both papers</title><style>"
          << kStyle << "</style></head><body>\n<h1>The figures of both papers, regenerated by diffdyn</h1>\n";
-    html << "<p>" << (info.quick ? "<b>Quick run</b> (small sizes: it shows that every figure is produced; its numbers "
-                                   "are not comparable with the papers')."
-                                 : "Full run.")
+    html << "<p>" << (info.quick    ? "<b>Quick run</b> (small sizes: it shows that every figure is produced; its numbers "
+                                      "are not comparable with the papers')."
+                      : info.stored ? "<b>Stored full runs</b>: each figure's results as the repository stores them "
+                                      "under paper_figures/, copied here and read as a run's would be; the machine and "
+                                      "date below are this page's, each figure's README gives its run's."
+                                    : "Full run.")
          << "<br>Command: <code>" << Escape(info.invocation) << "</code><br>Machine: " << Escape(info.machine)
          << ". Date: " << Escape(info.date) << ". Wall time " << fmt::format("{:.1f}", info.seconds) << " s.</p>\n";
     html << "<p>" << runs.size() << (runs.size() == 1 ? " figure, " : " figures, ") << failed << " failed. " << judged

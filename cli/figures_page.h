@@ -10,6 +10,11 @@
 // of the rows of `csv` whose cells equal every `where` entry; "value" requires
 // exactly one such row. The page's cell carries the same recipe as data attributes
 // (data-csv, data-where, data-column, data-reduce), so a reader or a test can redo it.
+//
+// A number with "bench": true reads a stored benchmark comparison (bench/results/,
+// written by the PyTorch references of bench/) that the page copies to DIR/bench/;
+// its "pytorch_column" (ours_ms beside torch_ms) is set beside ours with the ratio,
+// and the row names the machine and date of that benchmark run.
 #pragma once
 
 #include <cstddef>
@@ -29,10 +34,20 @@ struct FigureNumber {
   std::vector<std::pair<std::string, std::string>> where;
   std::string column;
   std::string reduce = "value";
+  bool bench = false;           // csv is under DIR/bench/ (a bench/results/ file), not DIR/<figure>/
+  std::string pytorch_column;   // the same rows' PyTorch time (empty: no PyTorch reference)
   std::optional<double> reference;
   std::string reference_source;
-  // Acceptance: bounds on the value and on value / reference (unset: none).
-  std::optional<double> min, max, min_ratio, max_ratio;
+  // Acceptance: bounds on the value, on value / reference and on value / PyTorch
+  // (unset: none).
+  std::optional<double> min, max, min_ratio, max_ratio, max_pytorch_ratio;
+};
+
+/// Where a figure's full run is stored in the repository (manifest key "stored").
+struct StoredRun {
+  std::string folder;  // relative to the manifest's folder; empty: none stored
+  // Files the full run writes as one that are stored in parts (same header, rows in turn).
+  std::vector<std::pair<std::string, std::vector<std::string>>> parts;
 };
 
 /// One figure: how to run its program and what it produces.
@@ -41,6 +56,7 @@ struct FigureEntry {
   std::vector<std::string> full_args, quick_args;
   std::vector<std::string> images, files;
   std::vector<FigureNumber> numbers;
+  StoredRun stored;
 };
 
 /// Reads the manifest; throws diffdyn::Error "<path>: ..." for a missing key, a
@@ -51,9 +67,15 @@ std::vector<FigureEntry> ReadFigureManifest(const std::filesystem::path& path);
 /// The same on the manifest's text, named `name` in errors (the fuzz target's entry).
 std::vector<FigureEntry> ParseFigureManifest(std::string_view text, const std::string& name);
 
+/// The folder, relative to the page, that holds `number`'s CSV: "bench" for a
+/// benchmark comparison, else the figure's name.
+std::string NumberFolder(const FigureEntry& figure, const FigureNumber& number);
+
 /// A number's value, or why there is none.
 struct NumberValue {
   std::optional<double> value;
+  std::optional<double> pytorch;  // the pytorch_column reduced the same way
+  std::string measured;           // "<machine>, <date>" of a bench row (its machine and date cells)
   std::size_t rows = 0;  // rows matching `where`
   std::string problem;   // empty when there is a value
 };
@@ -71,12 +93,14 @@ struct FigureRun {
   std::string command;  // the shell command that redoes the run
   int exit_code = -1;
   double seconds = 0;
-  std::string log_dir;  // relative to the page: stdout.txt, stderr.txt
+  std::string log_dir;  // relative to the page: stdout.txt, stderr.txt; empty: a stored run
+  std::string stored;   // a stored run's folder as the repository names it, or why there is none
 };
 
 /// What the page says about the whole run.
 struct PageInfo {
   bool quick = false;
+  bool stored = false;  // the figures' stored full runs, copied rather than run
   std::string machine;  // CPU, cores, vector ISA
   std::string date;     // UTC
   std::string invocation;

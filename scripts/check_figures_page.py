@@ -6,12 +6,13 @@
 Exit 0 when
   * every <img src> and <a href> that is not an anchor or a URL names an existing file
     relative to the page;
-  * every number cell (class "ours") equals what its recipe gives when recomputed here
+  * every number cell (class "ours", or "pytorch" for a benchmark's PyTorch time) equals what its recipe gives when recomputed here
     from the CSV with Python's csv module (data-csv, data-where "col=val;...",
     data-column, data-reduce: value | median | mean | min | max | count), printed to
     4 significant digits, and a cell that says "missing" has no value here either;
   * with --manifest: every figure has a section with every listed PNG shown and one
-    number cell per listed number.
+    number cell per listed number;
+  * with --no-missing: no number cell says "missing" (a stored run must give them all).
 Otherwise it prints one line per failure and exits 1.
 """
 import argparse
@@ -44,7 +45,7 @@ class Page(html.parser.HTMLParser):
                 self.sections[self._section]["images"].append(os.path.basename(a.get("src", "")))
         if tag == "a" and "href" in a:
             self.links.append(("a", a["href"]))
-        if tag == "td" and a.get("class") == "ours":
+        if tag == "td" and a.get("class") in ("ours", "pytorch"):
             self._cell = [a, ""]
 
     def handle_data(self, data):
@@ -54,7 +55,7 @@ class Page(html.parser.HTMLParser):
     def handle_endtag(self, tag):
         if tag == "td" and self._cell is not None:
             self.cells.append((self._cell[0], self._cell[1].strip()))
-            if self._section:
+            if self._section and self._cell[0].get("class") == "ours":
                 self.sections[self._section]["cells"] += 1
             self._cell = None
         if tag == "section":
@@ -89,6 +90,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("page")
     parser.add_argument("--manifest")
+    parser.add_argument("--no-missing", action="store_true")
     args = parser.parse_args()
     root = os.path.dirname(os.path.abspath(args.page))
     page = Page()
@@ -103,7 +105,9 @@ def main():
     for attrs, text in page.cells:
         expected = recompute(root, attrs)
         name = f"{attrs['data-csv']} [{attrs['data-where']}] {attrs['data-reduce']} of {attrs['data-column']}"
-        if expected is None:
+        if expected is None and args.no_missing:
+            failures.append(f"{name}: missing ({text})")
+        elif expected is None:
             if not text.startswith("missing"):
                 failures.append(f"{name}: the page shows {text}, the CSV gives no value")
         elif text != f"{expected:.4g}":

@@ -3,8 +3,9 @@
 
     push_summaries.py seed1.json seed2.json ... > summaries.csv
 
-Columns: seed, trials, successes, ci95_low, ci95_high, mean_pushes (the JSON's keys,
-DESIGN.md) and failures: the outcomes other than success with their counts
+Columns: seed, trials, successes, ci95_low, ci95_high, mean_pushes, the planner's
+settings (model, samples, horizon, collision_margin, collision_substeps, reach_weight,
+reach_steps, reach_limited; the JSON's keys, DESIGN.md) and failures: the outcomes other than success with their counts
 ("1 max steps, 1 obstacle contact"), or "-". A file that is not such an output gives
 one `error:` line naming it and exit 2, and nothing is written.
 """
@@ -13,7 +14,8 @@ import io
 import json
 import sys
 
-KEYS = ("seed", "trials", "successes", "ci95_low", "ci95_high", "mean_pushes")
+KEYS = ("seed", "trials", "successes", "ci95_low", "ci95_high", "mean_pushes", "model", "samples", "horizon",
+        "collision_margin", "collision_substeps", "reach_weight", "reach_steps", "reach_limited")
 
 
 def row(path):
@@ -22,7 +24,7 @@ def row(path):
             j = json.load(f)
         fails = ", ".join(f"{n} {k.replace('_', ' ')}"
                           for k, n in sorted(j["outcomes"].items()) if k != "success")
-        return [j[k] for k in KEYS] + [fails or "-"]
+        return [str(j[k]).lower() if isinstance(j[k], bool) else j[k] for k in KEYS] + [fails or "-"]
     except (OSError, ValueError, KeyError, AttributeError, TypeError) as e:
         raise ValueError(f"error: {path}: not a `diffdyn push --json` output ({e})") from e
 

@@ -2,7 +2,9 @@
 // write a CSV and a PNG), so the command is tested apart from the papers' figures:
 // the page's numbers, ratios and verdicts, the independent page checker
 // (scripts/check_figures_page.py) passing on it and failing on a changed number or
-// a missing image, a failing figure (exit 1, page still written), and bad input,
+// a missing image, speed rows with PyTorch's time from a stored benchmark
+// comparison, the page of stored runs (copied, parts joined, nothing run), a
+// failing figure (exit 1, page still written), and bad input,
 // a missing {data} file among it (one line, exit 2, nothing written). The real
 // figures' quick run is the ctest paper_figures.figures_quick.
 #include <sys/wait.h>
@@ -101,6 +103,81 @@ TEST(Figures, PageShowsEachNumberBesideItsReferenceAndTheCheckerAgrees) {
   EXPECT_EQ(CheckPage(out + "/index.html"), 1);
 }
 
+TEST(Figures, BenchRowsSetPyTorchBesideOursFromTheStoredComparison) {
+  const StandIns s = MakeStandIns("figures_bench", false);
+  const fs::path bench = TempPath("figures_bench_results");
+  fs::remove_all(bench);
+  fs::create_directories(bench);
+  std::ofstream(bench / "speed.csv") << "workload,precision,ours_ms,torch_ms,machine,date\n"
+                                        "epoch,f64,3,10,Some CPU (2 cores; AVX2),2026-11-30\n"
+                                        "epoch,f32,2,4,Some CPU (2 cores; AVX2),2026-11-30\n";
+  std::ofstream(s.manifest) << R"({"figures": [{"name": "ok", "paper": "Fig. 1", "title": "t", "caption": "c",
+      "program": "fig_ok", "full_args": [], "quick_args": [], "full_time": "", "images": [], "files": [], "numbers": [
+        {"label": "f64 epoch", "bench": true, "csv": "speed.csv", "where": {"precision": "f64"}, "column": "ours_ms",
+         "reduce": "value", "pytorch_column": "torch_ms", "accept": {"max_pytorch_ratio": 0.33}},
+        {"label": "f32 epoch", "bench": true, "csv": "speed.csv", "where": {"precision": "f32"}, "column": "ours_ms",
+         "reduce": "value", "pytorch_column": "torch_ms", "accept": {"max_pytorch_ratio": 0.33}},
+        {"label": "not measured", "bench": true, "csv": "absent.csv", "column": "ours_ms", "reduce": "value",
+         "pytorch_column": "torch_ms"}]}]})";
+  const std::string out = TempPath("figures_bench_out");
+  fs::remove_all(out);
+  const auto r = RunDiffdyn(Options(s, out) + " --bench-results '" + bench.string() + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string page = ReadAll(out + "/index.html");
+  // 3 ms against 10 ms: 0.3, within 0.33; 2 against 4: 0.5 misses; the CSV is copied beside the page.
+  EXPECT_EQ(ReadAll(out + "/bench/speed.csv"), ReadAll((bench / "speed.csv").string()));
+  EXPECT_NE(page.find("data-csv=\"bench/speed.csv\" data-where=\"precision=f64\" data-column=\"torch_ms\" "
+                      "data-reduce=\"value\">10</td><td>0.3</td>"),
+            std::string::npos);
+  EXPECT_NE(page.find("<li>Fig. 1: f32 epoch</li>"), std::string::npos);
+  EXPECT_EQ(page.find("<li>Fig. 1: f64 epoch</li>"), std::string::npos);
+  EXPECT_NE(page.find("ours / PyTorch ≤ 0.33"), std::string::npos);
+  EXPECT_NE(page.find("benchmark run on Some CPU (2 cores; AVX2), 2026-11-30"), std::string::npos);
+  EXPECT_NE(page.find("missing: no CSV"), std::string::npos);
+  EXPECT_EQ(CheckPage(out + "/index.html"), 0);
+  // The checker recomputes the PyTorch cells too.
+  std::string changed = page;
+  changed.replace(changed.find(">10</td>"), 8, ">11</td>");
+  std::ofstream(out + "/changed.html") << changed;
+  EXPECT_EQ(CheckPage(out + "/changed.html"), 1);
+}
+
+TEST(Figures, StoredRunsAreCopiedAndJoinedNotRun) {
+  const StandIns s = MakeStandIns("figures_stored", false);
+  const fs::path stored = fs::path(s.programs) / "kept";
+  fs::create_directories(stored);
+  std::ofstream(stored / "values_a.csv") << "kind,seed,loss\na,1,1.0\na,2,10.0\n";
+  std::ofstream(stored / "values_b.csv") << "kind,seed,loss\na,3,2.0\nb,1,0.125\n";
+  std::ofstream(stored / "plot.png") << "png";
+  std::string manifest = ReadAll(s.manifest);
+  manifest.replace(manifest.find("\"numbers\""), 0,
+                   R"("stored": {"folder": "kept", "parts": {"values.csv": ["values_a.csv", "values_b.csv"]}}, )");
+  std::ofstream(s.manifest) << manifest;
+  const std::string out = TempPath("figures_stored_out");
+  fs::remove_all(out);
+  const auto r = RunDiffdyn(Options(s, out) + " --stored");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(fs::exists(out + "/ok/runs.txt"));  // the program did not run
+  EXPECT_EQ(ReadAll(out + "/ok/values.csv"), "kind,seed,loss\na,1,1.0\na,2,10.0\na,3,2.0\nb,1,0.125\n");
+  const std::string page = ReadAll(out + "/index.html");
+  EXPECT_NE(page.find("<b>Stored full runs</b>"), std::string::npos);
+  EXPECT_NE(page.find("Stored full run: paper_figures/kept"), std::string::npos);
+  // The joined rows give the same median as a run: 2 against the reference 4.
+  EXPECT_NE(page.find("data-reduce=\"median\">2</td><td>4</td>"), std::string::npos);
+  EXPECT_EQ(CheckPage(out + "/index.html"), 0);
+
+  // Parts whose headers differ are refused before anything is written, and --stored excludes --quick.
+  std::ofstream(stored / "values_b.csv") << "kind,loss\nb,0.125\n";
+  const std::string bad_out = TempPath("figures_stored_bad");
+  fs::remove_all(bad_out);
+  const auto bad = RunDiffdyn(Options(s, bad_out) + " --stored");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_EQ(CountLines(bad.err), 1) << bad.err;
+  EXPECT_NE(bad.err.find("values_b.csv: its header differs from values_a.csv's"), std::string::npos) << bad.err;
+  EXPECT_FALSE(fs::exists(bad_out + "/ok"));
+  EXPECT_EQ(RunDiffdyn(Options(s, TempPath("figures_stored_bad")) + " --stored --quick").exit_code, 2);
+}
+
 TEST(Figures, AFailingFigureIsARuntimeFailureWithThePageWritten) {
   const StandIns s = MakeStandIns("figures_fail", true);
   const std::string out = TempPath("figures_fail_out");
@@ -165,6 +242,11 @@ TEST(Figures, BadInputIsOneLineExitTwoAndNothingWritten) {
       "numbers": [{"label": "l", "csv": "a.csv", "column": "c", "reduce": "mode"}]}]})";
   expect_refused("figures --manifest '" + manifest + "' --programs '" + s.programs + "' --out '" + out + "'",
                  "unknown reduce 'mode'");
+  std::ofstream(manifest) << R"({"figures": [{"name": "x", "paper": "p", "title": "t", "caption": "c",
+      "program": "fig_ok", "full_args": [], "quick_args": [], "full_time": "", "images": [], "files": [],
+      "numbers": [{"label": "l", "csv": "a.csv", "column": "c", "reduce": "value", "accept": {"max_pytorch_ratio": 1}}]}]})";
+  expect_refused("figures --manifest '" + manifest + "' --programs '" + s.programs + "' --out '" + out + "'",
+                 "'max_pytorch_ratio' needs a 'pytorch_column'");
   expect_refused(Options(s, out) + " --workers 0", "--workers");
   std::ofstream(manifest) << R"({"figures": [{"name": "x", "paper": "p", "title": "t", "caption": "c",
       "program": "fig_ok", "full_args": ["--data", "{data}/missing.csv"], "quick_args": ["--data", "{data}/missing.csv"],
