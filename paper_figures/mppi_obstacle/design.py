@@ -18,7 +18,7 @@ Sweeps of `diffdyn push --obstacle --json` (OUT/<sweep>/):
   oracle         (--oracle) the ODE world as the model, K 100, T 5: 10 trials at margin 0.01,
                  4 substeps, and 5 trials with the seed's cost (margin 0, no substeps)
 Writes OUT/design.csv (scripts/push_summaries.py over every task, plus the sweep's
-name) and OUT/model_error.csv: the xy error of the model's prediction of every
+name) and OUT/design_model_error.csv: the xy error of the model's prediction of every
 executed push of reach_blind seeds 1 and 2 (pushes, median, p90, max in mm).
 
     design.py --diffdyn build/cli/diffdyn --out OUT [--oracle]
@@ -89,7 +89,7 @@ def summaries(tasks_by_sweep, out):
 
 
 def model_error(tasks, out):
-    """model_error.csv: per executed push, the xy distance between the pose reached (a row's
+    """design_model_error.csv: per executed push, the xy distance between the pose reached (a row's
     x, y) and the model's prediction of it (the row's pred_x, pred_y, made one push before)."""
     errors = []
     for t in tasks:
@@ -97,7 +97,7 @@ def model_error(tasks, out):
             if r.get("pred_x", "") not in ("", "nan"):
                 errors.append(1e3 * math.hypot(float(r["pred_x"]) - float(r["x"]), float(r["pred_y"]) - float(r["y"])))
     errors.sort()
-    with open(out / "model_error.csv", "w", newline="") as f:
+    with open(out / "design_model_error.csv", "w", newline="") as f:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(["pushes", "median_mm", "p90_mm", "max_mm"])
         w.writerow([len(errors), f"{statistics.median(errors):.4g}",
@@ -138,7 +138,7 @@ def main():
                                           {"--collision-margin": [0]})
     summaries(tasks, out)
     model_error(tasks["reach_blind"][:2], out)
-    print(f"{out / 'design.csv'}, {out / 'model_error.csv'}")
+    print(f"{out / 'design.csv'}, {out / 'design_model_error.csv'}")
 
 
 if __name__ == "__main__":
