@@ -14,7 +14,9 @@ above it (invisible when the README is rendered):
     ...the table, written by this script...
     <!-- end table -->
 
-Spec lines: the first names the CSV (relative to the README; several CSVs with
+Spec lines: the first names the CSV (relative to the README; a .json file, such
+as a command's --json output, is one row whose columns are its values flattened:
+nominal_rmse_0, parameters_block_inertia_value; several CSVs with
 the same columns, separated by spaces, give their rows in turn); lines starting
 with `|` are the header (expressions there see every row); every other line is
 `FILTER: | cells |`.
@@ -47,6 +49,7 @@ import argparse
 import csv
 import difflib
 import functools
+import json
 import math
 import re
 import statistics
@@ -122,9 +125,29 @@ FUNCTIONS = {
 }
 
 
+def flatten(value, prefix, out):
+    """A JSON value as columns: objects and lists by key_sub and key_<index>; a list of
+    objects that each have a string "name" by key_<name>."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            flatten(v, f"{prefix}_{k}" if prefix else k, out)
+    elif isinstance(value, list):
+        named = all(isinstance(v, dict) and isinstance(v.get("name"), str) for v in value) and value
+        for i, v in enumerate(value):
+            flatten(v, f"{prefix}_{v['name'] if named else i}", out)
+    else:
+        out[prefix] = value
+    return out
+
+
 @functools.lru_cache(maxsize=None)
 def read_csv(path):
-    """The rows of a CSV, read once per run however many tables and numbers cite it."""
+    """The rows of a CSV, read once per run however many tables and numbers cite it.
+    A .json file (one object, e.g. a command's --json output) is one row of its
+    flattened values (flatten)."""
+    if str(path).endswith(".json"):
+        with open(path) as f:
+            return [flatten(json.load(f), "", {})]
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
     return [{k: parse_value(v) for k, v in row.items()} for row in rows]

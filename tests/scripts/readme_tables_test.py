@@ -2,6 +2,7 @@
 """scripts/readme_tables.py on a README it writes itself: a table or an inline
 number that agrees passes; a changed result fails with a diff; --write repairs
 it; bad specs exit 2."""
+import json
 import tempfile
 from pathlib import Path
 
@@ -78,6 +79,17 @@ def main():
         readme.write_text(pooled)
         r = run("--check", str(readme))
         expect(r.returncode == 0, f"wilson() gives the pooled interval (rc {r.returncode}: {r.stderr})")
+
+        # A JSON output is one row of flattened values: lists by index, named objects by name.
+        (root / "results" / "run.json").write_text(json.dumps(
+            {"model": "m", "rmse": [0.25, 0.5], "parameters": [{"name": "mass", "value": 1.5}]}))
+        flat = ("<!-- table from results/run.json\n| rmse y | mass |\n|---|---|\n"
+                "model=m: | {rmse_1} | {parameters_mass_value} |\n-->\n"
+                "| rmse y | mass |\n|---|---|\n| 0.5 | 1.5 |\n<!-- end table -->\n"
+                "x is 0.25<!-- = {rmse_0} from results/run.json -->.\n")
+        readme.write_text(flat)
+        r = run("--check", str(readme))
+        expect(r.returncode == 0, f"a JSON file gives one flattened row (rc {r.returncode}: {r.stderr})")
 
         for bad, message in [
             (README.replace("model=b:", "model=c:"), "no CSV row matches"),
