@@ -24,7 +24,7 @@ FILTER is `-` (a literal row, copied) or `column=value,...` (the CSV rows where
 each column equals its value; `*` takes any value). In the cells, `{expr}` or
 `{expr:format}` is a Python expression over the matched rows: with one row, a
 column name is its value (a number where it parses as one); with several, a
-list of the values, for median, mean, min, max, sum, len; at(values, column,
+list of the values, for median, mean, min, max, sum, len, zip; at(values, column,
 value, ...) is the entry of the one row whose columns equal the values (a grid
 cell: at(val_loss, hidden, 32)); pick(values, column, value, ...) the entries of
 all such rows. sci(x, digits=3) writes 1.38e-4. wilson(successes, trials) is the
@@ -121,7 +121,7 @@ def wilson(successes, trials, z=1.96):
 FUNCTIONS = {
     "at": at, "pick": pick, "wilson": wilson,
     "median": statistics.median, "mean": statistics.fmean, "min": min, "max": max,
-    "sum": sum, "len": len, "sci": sci, "round": round, "abs": abs,
+    "sum": sum, "len": len, "sci": sci, "round": round, "abs": abs, "zip": zip,
 }
 
 
