@@ -184,19 +184,33 @@ std::vector<std::string> SplitCsvLine(const std::string& line) {
   return cells;
 }
 
-// The `column` cells of the rows matching n.where; sets `problem` on failure.
-std::vector<std::string> MatchingCells(const FigureNumber& n, const std::string& column_name, const fs::path& path,
-                                       std::string& problem) {
+// A CSV as read: its header and its non-empty rows, split into cells.
+struct CsvTable {
+  std::vector<std::string> header;
+  std::vector<std::vector<std::string>> rows;
+};
+
+// `path` read once; nothing (and `problem` set) when it cannot be read.
+std::optional<CsvTable> ReadCsvTable(const fs::path& path, std::string& problem) {
   std::ifstream in(path);
   std::string line;
   if (!in.good() || !std::getline(in, line)) {
     problem = "no CSV";
-    return {};
+    return std::nullopt;
   }
-  const std::vector<std::string> header = SplitCsvLine(line);
+  CsvTable table{SplitCsvLine(line), {}};
+  while (std::getline(in, line)) {
+    if (!line.empty() && line != "\r") table.rows.push_back(SplitCsvLine(line));
+  }
+  return table;
+}
+
+// The `column_name` cells of the table's rows matching n.where; sets `problem` on failure.
+std::vector<std::string> MatchingCells(const FigureNumber& n, const std::string& column_name, const CsvTable& table,
+                                       std::string& problem) {
   const auto index_of = [&](const std::string& name) -> std::ptrdiff_t {
-    const auto it = std::find(header.begin(), header.end(), name);
-    return it == header.end() ? -1 : it - header.begin();
+    const auto it = std::find(table.header.begin(), table.header.end(), name);
+    return it == table.header.end() ? -1 : it - table.header.begin();
   };
   const std::ptrdiff_t column = index_of(column_name);
   std::vector<std::pair<std::ptrdiff_t, std::string>> filters;
@@ -206,9 +220,7 @@ std::vector<std::string> MatchingCells(const FigureNumber& n, const std::string&
     return {};
   }
   std::vector<std::string> cells;
-  while (std::getline(in, line)) {
-    if (line.empty() || line == "\r") continue;
-    const std::vector<std::string> row = SplitCsvLine(line);
+  for (const std::vector<std::string>& row : table.rows) {
     const auto cell = [&](std::ptrdiff_t i) { return static_cast<std::size_t>(i) < row.size() ? row[i] : ""; };
     bool match = true;
     for (const auto& [i, value] : filters) match = match && cell(i) == value;
@@ -229,11 +241,11 @@ double Reduce(const std::string& how, std::vector<double> v) {
   return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);  // median
 }
 
-// `reduce` over `column` of the rows of n.csv under `folder` matching n.where;
+// `reduce` over `column` of the table's rows matching n.where;
 // nothing (and `problem` set) without exactly the rows and finite cells it needs.
-std::optional<double> ReducedColumn(const FigureNumber& n, const std::string& column, const fs::path& folder,
+std::optional<double> ReducedColumn(const FigureNumber& n, const std::string& column, const CsvTable& table,
                                     std::size_t& rows, std::string& problem) {
-  const std::vector<std::string> cells = MatchingCells(n, column, folder / n.csv, problem);
+  const std::vector<std::string> cells = MatchingCells(n, column, table, problem);
   if (!problem.empty()) return std::nullopt;
   rows = cells.size();
   if (cells.empty() || (n.reduce == "value" && cells.size() != 1)) {
@@ -383,15 +395,17 @@ std::string NumberFolder(const FigureEntry& figure, const FigureNumber& number) 
 
 NumberValue EvaluateFigureNumber(const FigureNumber& number, const fs::path& figure_dir) {
   NumberValue out;
-  out.value = ReducedColumn(number, number.column, figure_dir, out.rows, out.problem);
+  const std::optional<CsvTable> table = ReadCsvTable(figure_dir / number.csv, out.problem);
+  if (!table) return out;
+  out.value = ReducedColumn(number, number.column, *table, out.rows, out.problem);
   if (!out.value || number.pytorch_column.empty()) return out;
   std::size_t rows = 0;
   std::string problem;
-  out.pytorch = ReducedColumn(number, number.pytorch_column, figure_dir, rows, problem);
+  out.pytorch = ReducedColumn(number, number.pytorch_column, *table, rows, problem);
   // The benchmark run's machine and date, when the CSV has them.
   std::string none;
-  const std::vector<std::string> machine = MatchingCells(number, "machine", figure_dir / number.csv, none);
-  const std::vector<std::string> date = MatchingCells(number, "date", figure_dir / number.csv, none);
+  const std::vector<std::string> machine = MatchingCells(number, "machine", *table, none);
+  const std::vector<std::string> date = MatchingCells(number, "date", *table, none);
   if (none.empty() && !machine.empty() && !date.empty()) out.measured = machine.front() + ", " + date.front();
   return out;
 }

@@ -37,6 +37,13 @@ def run(*args):
     return run_script("readme_tables.py", *args)
 
 
+def expect_agrees(readme, text, what):
+    """Writes `text` as the README and expects --check to pass."""
+    readme.write_text(text)
+    r = run("--check", str(readme))
+    expect(r.returncode == 0, f"{what} (rc {r.returncode}: {r.stderr})")
+
+
 def main():
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
@@ -76,9 +83,7 @@ def main():
                   "seed=*: | all | [{100 * wilson(sum(successes), sum(trials))[0]:.1f}, "
                   "{100 * wilson(sum(successes), sum(trials))[1]:.1f}] % |\n-->\n"
                   "| seeds | interval |\n|---|---|\n| all | [95.7, 99.5] % |\n<!-- end table -->\n")
-        readme.write_text(pooled)
-        r = run("--check", str(readme))
-        expect(r.returncode == 0, f"wilson() gives the pooled interval (rc {r.returncode}: {r.stderr})")
+        expect_agrees(readme, pooled, "wilson() gives the pooled interval")
 
         # A JSON output is one row of flattened values: lists by index, named objects by name.
         (root / "results" / "run.json").write_text(json.dumps(
@@ -87,9 +92,7 @@ def main():
                 "model=m: | {rmse_1} | {parameters_mass_value} |\n-->\n"
                 "| rmse y | mass |\n|---|---|\n| 0.5 | 1.5 |\n<!-- end table -->\n"
                 "x is 0.25<!-- = {rmse_0} from results/run.json -->.\n")
-        readme.write_text(flat)
-        r = run("--check", str(readme))
-        expect(r.returncode == 0, f"a JSON file gives one flattened row (rc {r.returncode}: {r.stderr})")
+        expect_agrees(readme, flat, "a JSON file gives one flattened row")
 
         for bad, message in [
             (README.replace("model=b:", "model=c:"), "no CSV row matches"),
