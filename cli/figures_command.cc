@@ -325,6 +325,7 @@ void RegisterFiguresCommand(CLI::App& app) {
   command->add_option("--data", o->data, "The shared data folder ({data} in the manifest)")->capture_default_str();
   command->add_option("--bench-results", o->bench_results,
                       "Folder of the stored benchmark comparisons the page cites (copied to DIR/bench/)")
+      ->check(InputPath(/*allow_folder=*/true))
       ->capture_default_str();
   command->add_flag("--json", o->json, "Print a one-line JSON summary on stdout");
   command->add_flag("--quiet", o->quiet, "No progress lines");

@@ -248,6 +248,7 @@ TEST(Figures, BadInputIsOneLineExitTwoAndNothingWritten) {
   expect_refused("figures --manifest '" + manifest + "' --programs '" + s.programs + "' --out '" + out + "'",
                  "'max_pytorch_ratio' needs a 'pytorch_column'");
   expect_refused(Options(s, out) + " --workers 0", "--workers");
+  expect_refused(Options(s, out) + " --bench-results /nonexistent", "--bench-results");
   std::ofstream(manifest) << R"({"figures": [{"name": "x", "paper": "p", "title": "t", "caption": "c",
       "program": "fig_ok", "full_args": ["--data", "{data}/missing.csv"], "quick_args": ["--data", "{data}/missing.csv"],
       "full_time": "", "images": [], "files": [], "numbers": []}]})";
