@@ -19,6 +19,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -91,32 +92,117 @@ std::string ShellQuote(const std::string& s) {
   return out + "'";
 }
 
-// One sweep task per figure: its program, arguments, "--out DIR/NAME --plot".
-std::vector<SweepTask> MakeTasks(const std::vector<const FigureEntry*>& figures, const FiguresOptions& o) {
+// The tasks of one figure in the sweep: [first, first + count).
+struct FigureTasks {
+  const FigureEntry* entry = nullptr;
+  std::size_t first = 0, count = 0;
+  bool grid = false;  // run as a grid: parts to merge with the figure's plot script
+};
+
+// The figure's program and its arguments for this run ({data} substituted; a path
+// under the data folder is checked now, not when the figure fails).
+SweepTask FigureTask(const FigureEntry& e, const FiguresOptions& o) {
+  SweepTask task;
+  task.program = fs::path(o.programs) / e.program;
+  DIFFDYN_CHECK(::access(task.program.c_str(), X_OK) == 0, "--programs: ", task.program.string(),
+                " is not an executable (build the figure_* targets, or point --programs at them)");
+  for (const std::string& arg : o.quick ? e.quick_args : e.full_args) {
+    task.args.push_back(Substitute(arg, o.data));
+    DIFFDYN_CHECK(arg.find("{data}") == std::string::npos || fs::exists(task.args.back()), "--data: ",
+                  task.args.back(), " does not exist (figure ", e.name, " reads it)");
+  }
+  return task;
+}
+
+// The sweep's tasks: per figure one run with "--out DIR/NAME --plot", or for a
+// figure run as a grid one run per combination with "--out DIR/NAME/parts/<k>".
+std::vector<SweepTask> MakeTasks(const std::vector<const FigureEntry*>& figures, const FiguresOptions& o,
+                                 std::vector<FigureTasks>& spans) {
   std::vector<SweepTask> tasks;
   for (const FigureEntry* e : figures) {
-    SweepTask task;
-    task.index = static_cast<int>(tasks.size());
-    task.grid_values = {e->name};
-    task.program = fs::path(o.programs) / e->program;
-    DIFFDYN_CHECK(::access(task.program.c_str(), X_OK) == 0, "--programs: ", task.program.string(),
-                  " is not an executable (build the figure_* targets, or point --programs at them)");
-    for (const std::string& arg : o.quick ? e->quick_args : e->full_args) {
-      task.args.push_back(Substitute(arg, o.data));
-      // A path under the data folder is checked now, not when the figure fails.
-      DIFFDYN_CHECK(arg.find("{data}") == std::string::npos || fs::exists(task.args.back()), "--data: ",
-                    task.args.back(), " does not exist (figure ", e->name, " reads it)");
+    const SweepTask base = FigureTask(*e, o);
+    const std::vector<SweepGrid>& grids = o.quick ? e->quick_grid : e->full_grid;
+    FigureTasks span{e, tasks.size(), 0, !grids.empty()};
+    const fs::path folder = fs::path(o.out) / e->name;
+    if (grids.empty()) {
+      SweepTask task = base;
+      task.grid_values = {e->name};
+      task.args.insert(task.args.end(), {"--out", folder.string(), "--plot"});
+      tasks.push_back(std::move(task));
     }
-    task.args.insert(task.args.end(), {"--out", (fs::path(o.out) / e->name).string(), "--plot"});
-    tasks.push_back(std::move(task));
+    for (const SweepGrid& grid : grids) {
+      for (const SweepPoint& point : ExpandSweepGrid(grid)) {
+        SweepTask task = base;
+        std::string values;
+        for (const std::string& v : point.values) values += " " + v;
+        task.grid_values = {e->name + values};
+        task.args.insert(task.args.end(), point.args.begin(), point.args.end());
+        const std::string part = fmt::format("parts/{}", tasks.size() - span.first);
+        task.args.insert(task.args.end(), {"--out", (folder / part).string()});
+        tasks.push_back(std::move(task));
+      }
+    }
+    span.count = tasks.size() - span.first;
+    spans.push_back(span);
   }
+  for (std::size_t i = 0; i < tasks.size(); ++i) tasks[i].index = static_cast<int>(i);
   return tasks;
+}
+
+// Per figure run as a grid whose parts all succeeded: `python plot DIR/NAME
+// DIR/NAME/parts/0 ...`, which merges the parts and draws.
+std::vector<SweepTask> MakePlotTasks(const std::vector<FigureTasks>& spans, const std::vector<SweepTask>& tasks,
+                                     const std::vector<SweepResult>& results, const FiguresOptions& o) {
+  std::vector<SweepTask> plots;
+  for (const FigureTasks& span : spans) {
+    bool ok = span.grid;
+    for (std::size_t i = span.first; i < span.first + span.count; ++i) ok = ok && results[i].exit_code == 0;
+    if (!ok) continue;
+    SweepTask plot;
+    plot.index = static_cast<int>(plots.size());
+    plot.grid_values = {span.entry->name + " plot"};
+    plot.program = DIFFDYN_PYTHON;
+    plot.args = {(fs::path(o.manifest).parent_path() / span.entry->plot).string(),
+                 (fs::path(o.out) / span.entry->name).string()};
+    for (std::size_t i = span.first; i < span.first + span.count; ++i) {
+      const std::vector<std::string>& args = tasks[i].args;
+      plot.args.push_back(*(std::find(args.begin(), args.end(), "--out") + 1));
+    }
+    plots.push_back(std::move(plot));
+  }
+  return plots;
 }
 
 std::string CommandText(const SweepTask& task) {
   std::string text = ShellQuote(task.program.string());
   for (const std::string& arg : task.args) text += " " + ShellQuote(arg);
   return text;
+}
+
+// How each figure went: its tasks' (and plot's) commands, logs, time and exit code.
+std::vector<FigureRun> FigureRuns(const std::vector<FigureTasks>& spans, const std::vector<SweepTask>& tasks,
+                                  const std::vector<SweepResult>& results, const std::vector<SweepTask>& plots,
+                                  const std::vector<SweepResult>& plot_results) {
+  std::vector<FigureRun> runs;
+  auto add = [](FigureRun& run, const SweepTask& task, const SweepResult& r, const std::string& log_dir) {
+    run.commands.push_back(CommandText(task));
+    run.log_dirs.push_back(log_dir);
+    run.seconds += r.seconds;
+    if (run.exit_code == 0) run.exit_code = r.exit_code;
+  };
+  std::size_t plot = 0;
+  for (const FigureTasks& span : spans) {
+    FigureRun run{span.entry, {}, 0, 0, {}, ""};
+    for (std::size_t i = span.first; i < span.first + span.count; ++i) {
+      add(run, tasks[i], results[i], fmt::format("tasks/{}", i));
+    }
+    if (span.grid && run.exit_code == 0) {
+      add(run, plots[plot], plot_results[plot], fmt::format("plots/tasks/{}", plot));
+      ++plot;
+    }
+    runs.push_back(std::move(run));
+  }
+  return runs;
 }
 
 std::string UtcNow() {
@@ -199,13 +285,13 @@ std::vector<FigureRun> CopyStoredRuns(const std::vector<const FigureEntry*>& fig
   const fs::path root = fs::path(o.manifest).parent_path();
   std::vector<FigureRun> runs;
   for (const FigureEntry* e : figures) {
-    FigureRun run{e, "", 0, 0, "", "none stored"};
-    run.command = ShellQuote((fs::path(o.programs) / e->program).string());
-    for (const std::string& arg : e->full_args) run.command += " " + ShellQuote(Substitute(arg, o.data));
+    FigureRun run{e, {}, 0, 0, {}, "none stored"};
+    std::string command = ShellQuote((fs::path(o.programs) / e->program).string());
+    for (const std::string& arg : e->full_args) command += " " + ShellQuote(Substitute(arg, o.data));
     if (!e->stored.folder.empty()) {
       const fs::path from = root / e->stored.folder, to = fs::path(o.out) / e->name;
       run.stored = "paper_figures/" + e->stored.folder;
-      run.command += " --out " + ShellQuote(run.stored) + " --plot";
+      command += " --out " + ShellQuote(run.stored) + " --plot";
       fs::create_directories(to);
       for (const std::vector<std::string>* list : {&e->images, &e->files}) {
         for (const std::string& file : *list) {
@@ -220,6 +306,7 @@ std::vector<FigureRun> CopyStoredRuns(const std::vector<const FigureEntry*>& fig
         }
       }
     }
+    run.commands = {command};
     runs.push_back(std::move(run));
   }
   return runs;
@@ -246,6 +333,31 @@ void WriteStoredPage(const FiguresOptions& o, const std::string& invocation) {
   }
 }
 
+// Runs the figures' sweep (on mpirun's ranks or local workers; without --resume
+// every task anew) and returns the results in task order; nothing on the ranks
+// other than 0, which stop here.
+std::optional<std::vector<SweepResult>> RunFigureTasks(const std::vector<SweepTask>& tasks, const FiguresOptions& o,
+                                                       SweepQueue::Progress progress) {
+  const SweepFolder folder(o.out);
+  std::error_code ec;
+  if (!o.resume && MpiRankFromEnvironment() == 0) {  // under mpirun only rank 0 clears
+    for (const SweepTask& t : tasks) fs::remove(folder.TaskDir(t.index) / "result.json", ec);
+  }
+  SweepQueue queue(tasks, folder, std::move(progress));
+  if (!RunSweepTasks(fs::read_symlink("/proc/self/exe"), queue, o.workers).coordinator) return std::nullopt;
+  return queue.Results();
+}
+
+// The progress line of one finished task (nothing with --quiet).
+SweepQueue::Progress ProgressPrinter(const FiguresOptions& o, std::size_t total) {
+  return [&o, total](const SweepTask& t, const SweepResult& r, std::size_t finished) {
+    if (!o.quiet) {
+      fmt::print(stderr, "figures: [{}/{}] {}: exit {}, {:.1f} s\n", finished, total, t.grid_values[0], r.exit_code,
+                 r.seconds);
+    }
+  };
+}
+
 void RunFigures(const FiguresOptions& o, const std::string& invocation) {
   if (o.stored) return WriteStoredPage(o, invocation);
   const auto start = std::chrono::steady_clock::now();
@@ -253,35 +365,30 @@ void RunFigures(const FiguresOptions& o, const std::string& invocation) {
   const std::vector<const FigureEntry*> figures = Select(manifest, o.only);
   const fs::path out(o.out), page = fs::path(o.out) / "index.html";
   CheckOutputPath(page);
-  const std::vector<SweepTask> tasks = MakeTasks(figures, o);
+  std::vector<FigureTasks> spans;
+  const std::vector<SweepTask> tasks = MakeTasks(figures, o, spans);
   std::error_code ec;
   fs::create_directories(out / "tasks", ec);
   if (ec) throw std::runtime_error(StrCat(o.out, ": cannot create the folder: ", ec.message()));
-  const SweepFolder folder(out);
-  const bool lead = MpiRankFromEnvironment() == 0;  // under mpirun only rank 0 clears and reports
-  if (!o.resume && lead) {
-    for (const SweepTask& t : tasks) fs::remove(folder.TaskDir(t.index) / "result.json", ec);
-  }
-
-  if (!o.quiet && lead) {
+  if (!o.quiet && MpiRankFromEnvironment() == 0) {
     for (const FigureEntry* e : figures) {
       fmt::print(stderr, "figures: {} ({}){}\n", e->name, e->paper, o.quick ? "" : "; full run: " + e->full_time);
     }
   }
-  SweepQueue queue(tasks, folder, [&](const SweepTask& t, const SweepResult& r, std::size_t finished) {
-    if (!o.quiet) {
-      fmt::print(stderr, "figures: [{}/{}] {}: exit {}, {:.1f} s\n", finished, tasks.size(), t.grid_values[0],
-                 r.exit_code, r.seconds);
-    }
-  });
-  if (!RunSweepTasks(fs::read_symlink("/proc/self/exe"), queue, o.workers).coordinator) return;
+  const std::optional<std::vector<SweepResult>> results = RunFigureTasks(tasks, o, ProgressPrinter(o, tasks.size()));
+  if (!results) return;
 
-  std::vector<FigureRun> runs;
+  // The grids' parts merged and drawn by each figure's plot script, always anew.
+  const std::vector<SweepTask> plots = MakePlotTasks(spans, tasks, *results, o);
+  const SweepFolder plot_folder(out / "plots");
+  for (const SweepTask& t : plots) fs::remove(plot_folder.TaskDir(t.index) / "result.json", ec);
+  SweepQueue plot_queue(plots, plot_folder, ProgressPrinter(o, plots.size()));
+  RunSweepLocal(DIFFDYN_PYTHON, plot_queue, o.workers);
+
+  const std::vector<FigureRun> runs = FigureRuns(spans, tasks, *results, plots, plot_queue.Results());
   std::vector<std::string> failed;
-  for (std::size_t i = 0; i < figures.size(); ++i) {
-    const SweepResult& r = queue.Results()[i];
-    runs.push_back({figures[i], CommandText(tasks[i]), r.exit_code, r.seconds, fmt::format("tasks/{}", i), ""});
-    if (r.exit_code != 0) failed.push_back(figures[i]->name);
+  for (const FigureRun& run : runs) {
+    if (run.exit_code != 0) failed.push_back(run.entry->name);
   }
   CopyBenchResults(figures, o);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -18,7 +18,7 @@
 namespace diffdyn::cli {
 namespace {
 namespace fs = std::filesystem;
-using nlohmann::json;
+using json = nlohmann::ordered_json;  // a grid's axes keep the manifest's order
 
 // ---------------------------------------------------------------------------
 // The manifest.
@@ -120,6 +120,22 @@ StoredRun ReadStored(const json& j, const std::string& where) {
   return stored;
 }
 
+// `key`: a list of sweep grids over the program's options (absent: none). The
+// figures command sets --out and --plot itself.
+std::vector<SweepGrid> Grids(const json& j, const char* key, const std::string& where) {
+  if (!j.contains(key)) return {};
+  DIFFDYN_CHECK(j[key].is_array() && !j[key].empty(), where, ": '", key, "' must be a non-empty array of grids");
+  std::vector<SweepGrid> grids;
+  for (std::size_t i = 0; i < j[key].size(); ++i) {
+    const std::string name = StrCat(where, ": ", key, "[", i, "]");
+    grids.push_back(ParseSweepGrid(j[key][i], name));
+    for (const auto& [flag, values] : grids.back()) {
+      DIFFDYN_CHECK(flag != "--out" && flag != "--plot", name, ": '", flag, "' is set by diffdyn figures");
+    }
+  }
+  return grids;
+}
+
 FigureEntry ReadEntry(const json& j, const std::string& where) {
   DIFFDYN_CHECK(j.is_object(), where, ": must be an object");
   FigureEntry e;
@@ -137,6 +153,12 @@ FigureEntry ReadEntry(const json& j, const std::string& where) {
   e.readme = Text(j, "readme", here, /*required=*/false);
   e.full_args = Texts(j, "full_args", here);
   e.quick_args = Texts(j, "quick_args", here);
+  e.full_grid = Grids(j, "grid", here);
+  e.quick_grid = Grids(j, "quick_grid", here);
+  e.plot = Text(j, "plot", here, /*required=*/false);
+  if (!e.plot.empty()) CheckInside(e.plot, here);
+  DIFFDYN_CHECK(!e.plot.empty() || (e.full_grid.empty() && e.quick_grid.empty()), here,
+                ": a figure run as a grid needs a 'plot' script to merge its parts");
   e.images = Texts(j, "images", here);
   e.files = Texts(j, "files", here);
   for (const std::string& f : e.images) CheckInside(f, here);
@@ -342,13 +364,19 @@ void WriteFigure(std::ostream& html, const FigureRun& run, const std::vector<Num
   const FigureEntry& e = *run.entry;
   html << "<section id=\"" << e.name << "\">\n<h2>" << Escape(e.paper) << ": " << Escape(e.title) << "</h2>\n";
   html << "<p>" << Escape(e.caption) << "</p>\n";
-  html << "<p class=\"run\">Command: <code>" << Escape(run.command) << "</code><br>";
-  if (run.log_dir.empty()) {
+  html << "<p class=\"run\">" << (run.commands.size() == 1 ? "Command" : "Commands (the grid's runs, then its merge and plot)") << ":";
+  for (const std::string& command : run.commands) html << "<br><code>" << Escape(command) << "</code>";
+  html << "<br>";
+  if (run.log_dirs.empty()) {
     html << "Stored full run: " << Escape(run.stored) << " (not rerun here; its README gives the date and machine).";
   } else {
-    html << "Wall time " << fmt::format("{:.1f}", run.seconds) << " s, exit code " << run.exit_code
-         << ". Logs: <a href=\"" << Escape(run.log_dir) << "/stdout.txt\">stdout</a>, <a href=\""
-         << Escape(run.log_dir) << "/stderr.txt\">stderr</a>.";
+    html << "Wall time " << fmt::format("{:.1f}", run.seconds) << " s, exit code " << run.exit_code << ". Logs:";
+    for (std::size_t i = 0; i < run.log_dirs.size(); ++i) {
+      const std::string dir = Escape(run.log_dirs[i]);
+      html << (i == 0 ? " " : "; ") << (run.log_dirs.size() == 1 ? "" : fmt::format("{} ", i + 1)) << "<a href=\""
+           << dir << "/stdout.txt\">stdout</a>, <a href=\"" << dir << "/stderr.txt\">stderr</a>";
+    }
+    html << ".";
   }
   html << " Full run: " << Escape(e.full_time) << "."
        << (e.readme.empty() ? "" : " Details: paper_figures/" + Escape(e.readme) + ".") << "</p>\n<div class=\"pngs\">\n";
@@ -382,11 +410,11 @@ constexpr const char* kStyle =
 }  // namespace
 
 std::vector<FigureEntry> ReadFigureManifest(const fs::path& path) {
-  return FiguresFromJson(ReadJsonFile(path), path.string());
+  return FiguresFromJson(ReadJsonFile<json>(path), path.string());
 }
 
 std::vector<FigureEntry> ParseFigureManifest(std::string_view text, const std::string& name) {
-  return FiguresFromJson(ParseJsonText(text, name), name);
+  return FiguresFromJson(ParseJsonText<json>(text, name), name);
 }
 
 std::string NumberFolder(const FigureEntry& figure, const FigureNumber& number) {

@@ -25,6 +25,8 @@
 #include <utility>
 #include <vector>
 
+#include "diffdyn/solvers/sweep.h"
+
 namespace diffdyn::cli {
 
 /// One number of a figure, read from the figure's CSV.
@@ -54,6 +56,13 @@ struct StoredRun {
 struct FigureEntry {
   std::string name, paper, title, caption, program, full_time, readme;
   std::vector<std::string> full_args, quick_args;
+  // A figure run as a grid (manifest keys "grid", "quick_grid": lists of sweep
+  // grids over the program's options, their combinations in turn): one program run
+  // per combination, each into DIR/NAME/parts/<k>/, then `plot` (a script under
+  // the manifest's folder, `plot DIR/NAME DIR/NAME/parts/0 ...`) merges the parts
+  // into DIR/NAME and draws. Empty: one run into DIR/NAME with --plot.
+  std::vector<SweepGrid> full_grid, quick_grid;
+  std::string plot;
   std::vector<std::string> images, files;
   std::vector<FigureNumber> numbers;
   StoredRun stored;
@@ -90,11 +99,11 @@ std::string Verdict(const FigureNumber& number, const NumberValue& value);
 /// How one figure's run went.
 struct FigureRun {
   const FigureEntry* entry = nullptr;
-  std::string command;  // the shell command that redoes the run
-  int exit_code = -1;
-  double seconds = 0;
-  std::string log_dir;  // relative to the page: stdout.txt, stderr.txt; empty: a stored run
-  std::string stored;   // a stored run's folder as the repository names it, or why there is none
+  std::vector<std::string> commands;  // the shell commands that redo the run, in turn
+  int exit_code = -1;                 // the first failing command's, else 0
+  double seconds = 0;                 // summed over the commands
+  std::vector<std::string> log_dirs;  // per command, relative to the page: stdout.txt, stderr.txt; none: a stored run
+  std::string stored;                 // a stored run's folder as the repository names it, or why there is none
 };
 
 /// What the page says about the whole run.

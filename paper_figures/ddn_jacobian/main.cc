@@ -97,7 +97,7 @@ int main(int argc, char** argv) {
   bool quick = false, plot = false, quiet = false;
   std::string out = "ddn_jacobian_out", dims_arg = "1,2", acts_arg = "relu,softplus,tanh,cos", sweep_seeds;
   ddn_figure::Config base;
-  app.add_flag("--quick", quick, "tiny run (a few seconds): 2,560 samples, 3 epochs, relu and softplus");
+  app.add_flag("--quick", quick, "tiny run (a few seconds): 2,560 samples, 3 epochs, relu and softplus unless --activations is given");
   app.add_option("--out", out, "output folder for CSVs, model files and PNGs")->capture_default_str();
   app.add_option("--dims", dims_arg, "comma-separated dimensions (1, 2)")->capture_default_str();
   app.add_option("--activations", acts_arg, "comma-separated activations")->capture_default_str();
@@ -116,7 +116,7 @@ int main(int argc, char** argv) {
   if (quick) {
     base.n_train = 2560;
     base.epochs = 3;
-    acts_arg = "relu,softplus";
+    if (app.count("--activations") == 0) acts_arg = "relu,softplus";
   }
   try {
     fs::create_directories(out);

@@ -2,7 +2,11 @@
 """Draws the NeuralODE-Panda grid figures from the CSVs of figure_neuralode_grids and
 prints the README's tables (Markdown) and trend checks to stdout.
 
-    /usr/bin/python3 paper_figures/neuralode_grids/plot.py OUT_DIR
+    /usr/bin/python3 paper_figures/neuralode_grids/plot.py OUT_DIR [PART_DIR ...]
+
+With PART_DIRs (separate figure_neuralode_grids runs, e.g. one grid or seed each,
+as `diffdyn figures` runs them), their grid CSVs are first merged into OUT_DIR:
+the rows of each grid_*.csv in the order the parts are given, headers checked.
 
 grid_single.csv  -> fig2_3_single_step.png: validation loss over (grid points, hidden)
                     for each model and solver (the paper's Figs. 2 and 3), log colours.
@@ -34,6 +38,31 @@ def rows(path):
         return []
     with open(path) as f:
         return list(csv.DictReader(f))
+
+
+def merge(out, parts):
+    """Writes OUT/grid_<name>.csv from the parts' rows of that grid, in turn."""
+    os.makedirs(out, exist_ok=True)
+    for grid in ("accept", "compare", "single", "multi"):
+        name = f"grid_{grid}.csv"
+        header, body = None, []
+        for part in parts:
+            path = os.path.join(part, name)
+            if not os.path.exists(path):
+                continue
+            with open(path) as f:
+                lines = f.read().splitlines()
+            if not lines:
+                sys.exit(f"error: {path}: empty (no header)")
+            if header is not None and lines[:1] != [header]:
+                sys.exit(f"error: {path}: header differs from the first part's")
+            header = lines[0]
+            body += [line for line in lines[1:] if line]
+        if header is not None:
+            tmp = os.path.join(out, name + ".tmp")
+            with open(tmp, "w") as f:
+                f.write("\n".join([header] + body) + "\n")
+            os.replace(tmp, os.path.join(out, name))
 
 
 def val(r):
@@ -228,4 +257,6 @@ def main(out):
 
 
 if __name__ == "__main__":
+    if len(sys.argv) > 2:
+        merge(sys.argv[1], sys.argv[2:])
     main(sys.argv[1])

@@ -71,8 +71,7 @@ std::size_t SweepSpec::TaskCount() const {
 }
 
 SweepSpec ParseSweepSpec(std::string_view text, const std::string& name) {
-  (void)ParseJsonText(text, name);  // depth limit and a one-line message for invalid JSON
-  const nlohmann::ordered_json j = nlohmann::ordered_json::parse(text);
+  const auto j = ParseJsonText<nlohmann::ordered_json>(text, name);
   DIFFDYN_CHECK(j.is_object(), name, ": a sweep spec is a JSON object {\"command\", \"options\", \"grid\"}");
   for (const auto& [key, value] : j.items()) {
     DIFFDYN_CHECK(key == "command" || key == "options" || key == "grid", name, ": unknown key '",
@@ -99,26 +98,54 @@ SweepSpec ParseSweepSpec(std::string_view text, const std::string& name) {
     }
   }
   if (j.contains("grid")) {
-    DIFFDYN_CHECK(j["grid"].is_object(), name, ": 'grid' must be an object {\"--flag\": [values]}");
-    std::size_t count = 1;
-    for (const auto& [flag, values] : j["grid"].items()) {
-      const std::string where = StrCat(name, ": grid '", flag.substr(0, 60), "'");
-      CheckFlag(flag, StrCat(name, ": grid"));
-      DIFFDYN_CHECK(!seen[flag], where, " is also in options or given twice");
-      seen[flag] = true;
-      DIFFDYN_CHECK(values.is_array() && !values.empty(), where, " must be a non-empty list of values");
-      DIFFDYN_CHECK(values.size() <= kMaxSweepTasks / count, name, ": the grid has more than ", kMaxSweepTasks,
-                    " combinations");
-      count *= values.size();
-      std::vector<nlohmann::json> plain;
-      for (std::size_t i = 0; i < values.size(); ++i) {
-        CheckValue(values[i], StrCat(where, "[", i, "]"));
-        plain.push_back(Plain(values[i]));
-      }
-      spec.grid.emplace_back(flag, std::move(plain));
+    spec.grid = ParseSweepGrid(j["grid"], name);
+    for (const auto& [flag, values] : spec.grid) {
+      DIFFDYN_CHECK(!seen[flag], name, ": grid '", flag.substr(0, 60), "' is also in options");
     }
   }
   return spec;
+}
+
+SweepGrid ParseSweepGrid(const nlohmann::ordered_json& grid, const std::string& name) {
+  DIFFDYN_CHECK(grid.is_object(), name, ": 'grid' must be an object {\"--flag\": [values]}");
+  SweepGrid out;
+  std::size_t count = 1;
+  for (const auto& [flag, values] : grid.items()) {
+    const std::string where = StrCat(name, ": grid '", flag.substr(0, 60), "'");
+    CheckFlag(flag, StrCat(name, ": grid"));
+    DIFFDYN_CHECK(values.is_array() && !values.empty(), where, " must be a non-empty list of values");
+    DIFFDYN_CHECK(values.size() <= kMaxSweepTasks / count, name, ": the grid has more than ", kMaxSweepTasks,
+                  " combinations");
+    count *= values.size();
+    std::vector<nlohmann::json> plain;
+    for (std::size_t i = 0; i < values.size(); ++i) {
+      CheckValue(values[i], StrCat(where, "[", i, "]"));
+      plain.push_back(Plain(values[i]));
+    }
+    out.emplace_back(flag, std::move(plain));
+  }
+  return out;
+}
+
+std::vector<SweepPoint> ExpandSweepGrid(const SweepGrid& grid) {
+  std::size_t count = 1;
+  for (const auto& [flag, values] : grid) count *= values.size();
+  std::vector<SweepPoint> points(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    // Digits of i in the grid's mixed radix, the last axis varying fastest.
+    std::vector<std::size_t> digit(grid.size());
+    std::size_t rest = i;
+    for (std::size_t a = grid.size(); a-- > 0;) {
+      digit[a] = rest % grid[a].second.size();
+      rest /= grid[a].second.size();
+    }
+    for (std::size_t a = 0; a < grid.size(); ++a) {
+      const nlohmann::json& value = grid[a].second[digit[a]];
+      points[i].values.push_back(SweepValueText(value));
+      AppendOption(grid[a].first, value, points[i].args);
+    }
+  }
+  return points;
 }
 
 SweepSpec ReadSweepSpec(const fs::path& path) {
@@ -139,25 +166,16 @@ std::vector<SweepTask> ExpandSweep(const SweepSpec& spec, const fs::path& out_di
   bool has_out = false;
   for (const auto& [flag, value] : spec.options) has_out = has_out || flag == "--out";
   for (const auto& [flag, values] : spec.grid) has_out = has_out || flag == "--out";
-  const std::size_t count = spec.TaskCount();
+  const std::vector<SweepPoint> points = ExpandSweepGrid(spec.grid);
+  const std::size_t count = points.size();
   std::vector<SweepTask> tasks(count);
   for (std::size_t i = 0; i < count; ++i) {
     SweepTask& task = tasks[i];
     task.index = static_cast<int>(i);
     task.args.push_back(spec.command);
     for (const auto& [flag, value] : spec.options) AppendOption(flag, value, task.args);
-    // Digits of i in the grid's mixed radix, the last axis varying fastest.
-    std::vector<std::size_t> digit(spec.grid.size());
-    std::size_t rest = i;
-    for (std::size_t a = spec.grid.size(); a-- > 0;) {
-      digit[a] = rest % spec.grid[a].second.size();
-      rest /= spec.grid[a].second.size();
-    }
-    for (std::size_t a = 0; a < spec.grid.size(); ++a) {
-      const nlohmann::json& value = spec.grid[a].second[digit[a]];
-      task.grid_values.push_back(SweepValueText(value));
-      AppendOption(spec.grid[a].first, value, task.args);
-    }
+    task.grid_values = points[i].values;
+    task.args.insert(task.args.end(), points[i].args.begin(), points[i].args.end());
     if (!out_name.empty() && !has_out) {
       task.args.push_back("--out");
       task.args.push_back((out_dir / "tasks" / std::to_string(i) / out_name).string());

@@ -4,7 +4,8 @@
 // (scripts/check_figures_page.py) passing on it and failing on a changed number or
 // a missing image, speed rows with PyTorch's time from a stored benchmark
 // comparison, the page of stored runs (copied, parts joined, nothing run), a
-// failing figure (exit 1, page still written), and bad input,
+// failing figure (exit 1, page still written), a figure run as a grid (one task
+// per combination, parts merged by its plot script), and bad input,
 // a missing {data} file among it (one line, exit 2, nothing written). The real
 // figures' quick run is the ctest paper_figures.figures_quick.
 #include <sys/wait.h>
@@ -38,10 +39,16 @@ void WriteProgram(const fs::path& path, const std::string& body) {
   fs::permissions(path, fs::perms::owner_all);
 }
 
-StandIns MakeStandIns(const std::string& name, bool with_failing) {
+// An empty folder `name` under the tests' temporary folder.
+fs::path EmptyDir(const std::string& name) {
   const fs::path dir = TempPath(name);
   fs::remove_all(dir);
   fs::create_directories(dir);
+  return dir;
+}
+
+StandIns MakeStandIns(const std::string& name, bool with_failing) {
+  const fs::path dir = EmptyDir(name);
   // Arguments: [--quick] --out DIR --plot.
   WriteProgram(dir / "fig_ok",
                "while [ $# -gt 0 ]; do [ \"$1\" = --out ] && out=$2; shift; done\n"
@@ -105,9 +112,7 @@ TEST(Figures, PageShowsEachNumberBesideItsReferenceAndTheCheckerAgrees) {
 
 TEST(Figures, BenchRowsSetPyTorchBesideOursFromTheStoredComparison) {
   const StandIns s = MakeStandIns("figures_bench", false);
-  const fs::path bench = TempPath("figures_bench_results");
-  fs::remove_all(bench);
-  fs::create_directories(bench);
+  const fs::path bench = EmptyDir("figures_bench_results");
   std::ofstream(bench / "speed.csv") << "workload,precision,ours_ms,torch_ms,machine,date\n"
                                         "epoch,f64,3,10,Some CPU (2 cores; AVX2),2026-11-30\n"
                                         "epoch,f32,2,4,Some CPU (2 cores; AVX2),2026-11-30\n";
@@ -199,6 +204,60 @@ TEST(Figures, AFailingFigureIsARuntimeFailureWithThePageWritten) {
   EXPECT_EQ(ReadAll(out + "/ok/runs.txt"), "run\nrun\n");
 }
 
+// A stand-in figure run as a grid: `fig_row --kind K --seed S --out DIR` writes one
+// row of values.csv; plot.py merges the parts' rows into its first argument.
+StandIns MakeGridStandIn(const std::string& name, const std::string& grid) {
+  const fs::path dir = EmptyDir(name);
+  WriteProgram(dir / "fig_row",
+               "while [ $# -gt 0 ]; do case $1 in --out) out=$2;; --kind) k=$2;; --seed) s=$2;; --plot) exit 9;; "
+               "esac; shift; done\n"
+               "[ \"$k\" = x ] && exit 4\n"
+               "mkdir -p \"$out\"\n"
+               "case $k$s in a1) l=1.0;; a2) l=10.0;; a3) l=2.0;; *) l=0.125;; esac\n"
+               "printf 'kind,seed,loss\\n%s,%s,%s\\n' $k $s $l > \"$out/values.csv\"\n");
+  std::ofstream(dir / "plot.py") << "import sys\n"
+                                    "rows = [open(p + '/values.csv').read().splitlines() for p in sys.argv[2:]]\n"
+                                    "open(sys.argv[1] + '/values.csv', 'w').write('\\n'.join([rows[0][0]] + "
+                                    "[r[1] for r in rows]) + '\\n')\n"
+                                    "open(sys.argv[1] + '/plot.png', 'w').write('png')\n";
+  std::ofstream(dir / "figures.json") << R"({"figures": [{"name": "ok", "paper": "Fig. 1", "title": "Grid",
+      "caption": "c", "program": "fig_row", "full_args": [], "quick_args": [], "grid": )" << grid << R"(,
+      "plot": "plot.py", "full_time": "seconds", "images": ["plot.png"], "files": ["values.csv"], "numbers": [
+        {"label": "median loss of a", "csv": "values.csv", "where": {"kind": "a"}, "column": "loss",
+         "reduce": "median", "reference": 4}]}]})";
+  return {dir.string(), (dir / "figures.json").string()};
+}
+
+TEST(Figures, AGridFigureRunsOneTaskPerCombinationAndItsPlotMergesTheParts) {
+  const StandIns s = MakeGridStandIn(
+      "figures_grid", R"([{"--kind": ["a"], "--seed": [1, 2, 3]}, {"--kind": ["b"], "--seed": [1]}])");
+  const std::string out = TempPath("figures_grid_out");
+  fs::remove_all(out);
+  const auto r = RunDiffdyn(Options(s, out) + " --workers 2");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  // Four tasks in grid order (no --plot), then the merge.
+  EXPECT_EQ(ReadAll(out + "/ok/parts/1/values.csv"), "kind,seed,loss\na,2,10.0\n");
+  EXPECT_EQ(ReadAll(out + "/ok/parts/3/values.csv"), "kind,seed,loss\nb,1,0.125\n");
+  EXPECT_FALSE(fs::exists(out + "/tasks/4"));
+  EXPECT_EQ(ReadAll(out + "/ok/values.csv"), "kind,seed,loss\na,1,1.0\na,2,10.0\na,3,2.0\nb,1,0.125\n");
+  const std::string page = ReadAll(out + "/index.html");
+  EXPECT_NE(page.find("data-reduce=\"median\">2</td>"), std::string::npos);
+  EXPECT_NE(page.find("fig_row --kind a --seed 3 --out"), std::string::npos);
+  EXPECT_NE(page.find("plot.py"), std::string::npos);
+  EXPECT_NE(page.find("plots/tasks/0/stdout.txt"), std::string::npos);
+  EXPECT_EQ(CheckPage(out + "/index.html"), 0);
+
+  // A failing combination fails the figure and nothing is merged.
+  const StandIns bad = MakeGridStandIn("figures_grid_bad", R"([{"--kind": ["a", "x"], "--seed": [1]}])");
+  const std::string out_bad = TempPath("figures_grid_bad_out");
+  fs::remove_all(out_bad);
+  const auto failed = RunDiffdyn(Options(bad, out_bad));
+  EXPECT_EQ(failed.exit_code, 1);
+  EXPECT_NE(failed.err.find("1 of 1 figures failed (ok)"), std::string::npos) << failed.err;
+  EXPECT_FALSE(fs::exists(out_bad + "/ok/values.csv"));
+  EXPECT_FALSE(fs::exists(out_bad + "/plots/tasks/0"));
+}
+
 TEST(Figures, MpirunWithTwoRanksWritesTheSamePage) {
 #if !defined(DIFFDYN_MPIEXEC)
   GTEST_SKIP() << "built without MPI";
@@ -247,6 +306,16 @@ TEST(Figures, BadInputIsOneLineExitTwoAndNothingWritten) {
       "numbers": [{"label": "l", "csv": "a.csv", "column": "c", "reduce": "value", "accept": {"max_pytorch_ratio": 1}}]}]})";
   expect_refused("figures --manifest '" + manifest + "' --programs '" + s.programs + "' --out '" + out + "'",
                  "'max_pytorch_ratio' needs a 'pytorch_column'");
+  std::ofstream(manifest) << R"({"figures": [{"name": "x", "paper": "p", "title": "t", "caption": "c",
+      "program": "fig_ok", "full_args": [], "quick_args": [], "grid": [{"--seed": [1]}], "full_time": "",
+      "images": [], "files": [], "numbers": []}]})";
+  expect_refused("figures --manifest '" + manifest + "' --programs '" + s.programs + "' --out '" + out + "'",
+                 "a figure run as a grid needs a 'plot' script");
+  std::ofstream(manifest) << R"({"figures": [{"name": "x", "paper": "p", "title": "t", "caption": "c",
+      "program": "fig_ok", "full_args": [], "quick_args": [], "grid": [{"--out": ["a"]}], "plot": "p.py",
+      "full_time": "", "images": [], "files": [], "numbers": []}]})";
+  expect_refused("figures --manifest '" + manifest + "' --programs '" + s.programs + "' --out '" + out + "'",
+                 "'--out' is set by diffdyn figures");
   expect_refused(Options(s, out) + " --workers 0", "--workers");
   expect_refused(Options(s, out) + " --bench-results /nonexistent", "--bench-results");
   std::ofstream(manifest) << R"({"figures": [{"name": "x", "paper": "p", "title": "t", "caption": "c",

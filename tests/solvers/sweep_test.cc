@@ -63,6 +63,22 @@ TEST(SweepSpec, AnOutInTheSpecIsKeptAndNoGridIsOneTask) {
   EXPECT_TRUE(tasks[0].grid_values.empty());
 }
 
+TEST(SweepGrid, ExpandsAGridOnItsOwnInTheGivensOrder) {
+  // Any program's grid (diffdyn figures runs the figure programs' grids this way).
+  const SweepGrid grid = ParseSweepGrid(
+      nlohmann::ordered_json::parse(R"({"--seeds": [1, 2], "--fast": [true, false], "--name": ["a b"]})"), "g");
+  const std::vector<SweepPoint> points = ExpandSweepGrid(grid);
+  ASSERT_EQ(points.size(), 4u);
+  EXPECT_EQ(points[0].values, (std::vector<std::string>{"1", "true", "a b"}));
+  EXPECT_EQ(points[0].args, (std::vector<std::string>{"--seeds", "1", "--fast", "--name", "a b"}));
+  EXPECT_EQ(points[1].args, (std::vector<std::string>{"--seeds", "1", "--name", "a b"}));
+  EXPECT_EQ(points[3].values, (std::vector<std::string>{"2", "false", "a b"}));
+  ASSERT_EQ(ExpandSweepGrid({}).size(), 1u);
+  EXPECT_TRUE(ExpandSweepGrid({})[0].args.empty());
+  EXPECT_THROW(ParseSweepGrid(nlohmann::ordered_json::parse(R"({"--seeds": []})"), "g"), Error);
+  EXPECT_THROW(ParseSweepGrid(nlohmann::ordered_json::parse(R"([1])"), "g"), Error);
+}
+
 TEST(SweepSpec, RefusesWhatACommandLineCannotCarry) {
   const std::vector<std::pair<std::string, std::string>> cases = {
       {"[1]", "JSON object"},

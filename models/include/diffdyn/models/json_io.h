@@ -33,8 +33,10 @@ inline constexpr std::uintmax_t kMaxJsonBytes = std::uintmax_t{1} << 30;
 
 /// Parses `text` (named `name` in errors) after checking that arrays and objects
 /// nest at most kMaxJsonDepth deep; throws diffdyn::Error "<name>: ..." (one
-/// line) for invalid JSON or deeper nesting.
-inline nlohmann::json ParseJsonText(std::string_view text, const std::string& name) {
+/// line) for invalid JSON or deeper nesting. `Json` is nlohmann::json, or
+/// nlohmann::ordered_json where the order of an object's keys matters.
+template <class Json = nlohmann::json>
+Json ParseJsonText(std::string_view text, const std::string& name) {
   int depth = 0;
   bool in_string = false, escaped = false;
   for (const char c : text) {
@@ -51,8 +53,8 @@ inline nlohmann::json ParseJsonText(std::string_view text, const std::string& na
     }
   }
   try {
-    return nlohmann::json::parse(text);
-  } catch (const nlohmann::json::exception& e) {
+    return Json::parse(text);
+  } catch (const typename Json::exception& e) {
     std::string what = e.what();
     for (char& c : what) {
       if (c == '\n' || c == '\r') c = ' ';
@@ -64,13 +66,14 @@ inline nlohmann::json ParseJsonText(std::string_view text, const std::string& na
 
 /// Reads and parses the JSON file at `path` (a regular file of at most
 /// kMaxJsonBytes); errors as ParseJsonText, naming the path.
-inline nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
+template <class Json = nlohmann::json>
+Json ReadJsonFile(const std::filesystem::path& path) {
   std::ifstream in = OpenInputFile(path);
   std::error_code ec;
   const std::uintmax_t bytes = std::filesystem::file_size(path, ec);
   DIFFDYN_CHECK(!ec && bytes <= kMaxJsonBytes, path.string(), ": larger than ", kMaxJsonBytes, " bytes");
   const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-  return ParseJsonText(text, path.string());
+  return ParseJsonText<Json>(text, path.string());
 }
 
 /// The integer `v` if it is one and lies in [lo, hi]; throws diffdyn::Error

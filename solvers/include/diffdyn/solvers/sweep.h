@@ -49,16 +49,37 @@ namespace diffdyn {
 /// Most tasks one sweep may have (a larger grid is refused as bad input).
 inline constexpr std::size_t kMaxSweepTasks = 100000;
 
-/// A parsed sweep spec. Values are JSON scalars: strings, numbers or booleans.
+/// Grid axes, in the spec's order: flag ("--name") and its non-empty list of
+/// values (JSON scalars: strings, numbers or booleans).
+using SweepGrid = std::vector<std::pair<std::string, std::vector<nlohmann::json>>>;
+
+/// A parsed sweep spec.
 struct SweepSpec {
   std::string command;
   /// Fixed options, in the spec's order: flag ("--name") and value.
   std::vector<std::pair<std::string, nlohmann::json>> options;
-  /// Grid axes, in the spec's order: flag and its non-empty list of values.
-  std::vector<std::pair<std::string, std::vector<nlohmann::json>>> grid;
+  SweepGrid grid;
   /// Number of tasks: the product of the grid's list lengths (1 without a grid).
   std::size_t TaskCount() const;
 };
+
+/// Parses a grid object {"--flag": [values], ...} (named `name` in errors).
+/// Throws diffdyn::Error "<name>: ..." for a flag that does not start with "--",
+/// `--json`, an empty list, a value that is not a scalar, or more than
+/// kMaxSweepTasks combinations.
+SweepGrid ParseSweepGrid(const nlohmann::ordered_json& grid, const std::string& name);
+
+/// One combination of a grid's values.
+struct SweepPoint {
+  /// One value per axis, as SweepValueText.
+  std::vector<std::string> values;
+  /// The command-line arguments the values add ("--flag value", a bare flag for true).
+  std::vector<std::string> args;
+};
+
+/// The combinations of `grid` in grid order: the axes in their order, the last
+/// varying fastest; one empty point for an empty grid.
+std::vector<SweepPoint> ExpandSweepGrid(const SweepGrid& grid);
 
 /// Parses a spec from `text` (named `name` in errors). Throws diffdyn::Error
 /// "<name>: ..." for invalid JSON, a missing or non-string `command`, a flag that
