@@ -153,11 +153,50 @@ TEST(Activations, MakeActivationParsesAndRejects) {
   EXPECT_THROW(MakeActivation("tanh", NAN), Error);
 }
 
-// Distance in units in the last place between two finite doubles of the same sign.
-double UlpDistance(double a, double b) {
+// Distance in units in the last place (of S) between two finite values of the same sign.
+template <typename S>
+double UlpDistance(S a, S b) {
   if (a == b) return 0.0;
-  const double ulp = std::nextafter(std::abs(b), INFINITY) - std::abs(b);
-  return std::abs(a - b) / ulp;
+  const S ulp = std::nextafter(std::abs(b), std::numeric_limits<S>::infinity()) - std::abs(b);
+  return static_cast<double>(std::abs(a - b)) / static_cast<double>(ulp);
+}
+
+// The exponential and log1p behind the batched softplus and sigmoid, against libm
+// evaluated in long double and rounded to S: within 2 ulp over their whole domains,
+// 0 below exp's normal range, NaN kept, tiny log1p arguments exact.
+template <typename S>
+void ExpectExpAndLog1pWithinTwoUlp() {
+  const S min_x = internal::ExpConstants<S>::kMin;
+  double worst_exp = 0.0, worst_log = 0.0;
+  for (int i = 0; i <= 200000; ++i) {
+    const S x = static_cast<S>(min_x * (static_cast<double>(i) / 200000.0));
+    const S ref = static_cast<S>(std::exp(static_cast<long double>(x)));
+    const double d = UlpDistance(internal::ExpOfNonPositive(x), ref);
+    worst_exp = std::max(worst_exp, d);
+    ASSERT_LE(d, 2.0) << "exp(" << x << ")";
+  }
+  for (int i = 0; i <= 200000; ++i) {
+    const S e = static_cast<S>(i / 200000.0);
+    const S ref = static_cast<S>(std::log1p(static_cast<long double>(e)));
+    const double d = UlpDistance(internal::Log1pOfUnit(e), ref);
+    worst_log = std::max(worst_log, d);
+    ASSERT_LE(d, 2.0) << "log1p(" << e << ")";
+  }
+  EXPECT_GT(worst_exp + worst_log, 0.0);  // differs from libm somewhere: the test can see it
+  EXPECT_EQ(internal::ExpOfNonPositive(S(0)), S(1));
+  EXPECT_EQ(internal::ExpOfNonPositive(S(-0.0)), S(1));
+  EXPECT_EQ(internal::ExpOfNonPositive(min_x - S(1)), S(0));
+  EXPECT_EQ(internal::ExpOfNonPositive(-std::numeric_limits<S>::infinity()), S(0));
+  EXPECT_TRUE(std::isnan(internal::ExpOfNonPositive(std::numeric_limits<S>::quiet_NaN())));
+  EXPECT_TRUE(std::isnan(internal::ExpOfNonPositive(-std::numeric_limits<S>::quiet_NaN())));
+  EXPECT_EQ(internal::Log1pOfUnit(S(1e-30)), S(1e-30));
+  EXPECT_EQ(internal::Log1pOfUnit(S(0)), S(0));
+  EXPECT_TRUE(std::isnan(internal::Log1pOfUnit(std::numeric_limits<S>::quiet_NaN())));
+}
+
+TEST(Activations, ExpAndLog1pOfTheBatchedPathWithinTwoUlp) {
+  ExpectExpAndLog1pWithinTwoUlp<double>();
+  ExpectExpAndLog1pWithinTwoUlp<float>();
 }
 
 TEST(Activations, VectorizedTanhWithinFewUlpOfStdTanh) {

@@ -33,12 +33,14 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
 #include <string>
 #include <type_traits>
+#include <utility>
 
 #include <Eigen/Core>
 
@@ -279,34 +281,151 @@ inline S PositivePart(S x) {
   return std::bit_cast<S>(PositiveMask(x) & std::bit_cast<BitsOf<S>>(x));
 }
 
-// v[i] = sign bit of z[i] clear ? v[i] : e[i] v[i], in bit operations (see BitsOf).
-// z = -0 takes e v, which is v there (e = 1).
+// c[0] + x (c[1] + x (c[2] + ...)), unrolled at compile time (so loops over it vectorise).
+template <typename S, std::size_t N, std::size_t... I>
+inline S HornerUnrolled(const std::array<S, N>& c, S x, std::index_sequence<I...>) {
+  S p = c[N - 1];
+  ((p = p * x + c[N - 2 - I]), ...);
+  return p;
+}
+template <typename S, std::size_t N>
+inline S Horner(const std::array<S, N>& c, S x) {
+  return HornerUnrolled(c, x, std::make_index_sequence<N - 1>());
+}
+
+// The constants of ExpOfNonPositive: ln 2 split into a high part with trailing zero
+// bits (n ln2_hi is exact) and the rest; the shifter 1.5 2^mantissa (x log2(e) +
+// shifter holds the integer nearest to x log2(e) in its low bits); the smallest x
+// with a normal exp(x); the degree d of the Taylor polynomial of exp(r), |r| <= ln2/2,
+// whose remainder r^(d+1)/(d+1)! is below a tenth of an ulp; and the terms of
+// Log1pOfUnit's series (s^(2T-1)/(2T-1) below a tenth of an ulp at |s| <= 0.1716).
 template <typename S>
-inline void MultiplyWhereNegative(const S* __restrict z, const S* __restrict e,
-                                  S* __restrict v, Eigen::Index m) {
+struct ExpConstants;
+template <>
+struct ExpConstants<double> {
+  static constexpr double kLog2e = 1.4426950408889634, kLn2Hi = 6.93147180369123816490e-01,
+                          kLn2Lo = 1.90821492927058770002e-10, kShifter = 6755399441055744.0, kMin = -708.0;
+  static constexpr int kBias = 1023, kMantissa = 52, kDegree = 12, kAtanhTerms = 11;
+};
+template <>
+struct ExpConstants<float> {
+  static constexpr float kLog2e = 1.44269504f, kLn2Hi = 0.693145751953125f, kLn2Lo = 1.428606765330187e-06f,
+                         kShifter = 12582912.0f, kMin = -87.0f;
+  static constexpr int kBias = 127, kMantissa = 23, kDegree = 7, kAtanhTerms = 6;
+};
+
+// 1/k!, k = 0..D, and 2/(2k+1), k = 1..T-1: the series of exp(r) and of (2 atanh(s) / s - 2) / s^2.
+template <typename S, int D>
+constexpr std::array<S, D + 1> InverseFactorials() {
+  std::array<S, D + 1> c{};
+  double factorial = 1;
+  for (int k = 0; k <= D; ++k) {
+    if (k > 0) factorial *= k;
+    c[k] = S(1.0 / factorial);
+  }
+  return c;
+}
+template <typename S, int T>
+constexpr std::array<S, T - 1> TwiceAtanhTail() {
+  std::array<S, T - 1> c{};
+  for (int k = 1; k < T; ++k) c[k - 1] = S(2.0 / (2 * k + 1));
+  return c;
+}
+
+// exp(x) for x <= 0 (the activations' exp(-|z|)), branch free with integer masks so
+// that loops over it vectorise: x = n ln2 + r, |r| <= ln2/2, exp(r) by its Taylor
+// polynomial, times 2^n made in the exponent bits. Within 2 ulp of std::exp for
+// x >= kMin (-708 in double, -87 in float); 0 below (where std::exp is subnormal or
+// 0); NaN gives NaN. Positive x are outside its contract.
+template <typename S>
+inline S ExpOfNonPositive(S x) {
+  using C = ExpConstants<S>;
   using U = BitsOf<S>;
-  constexpr int kSignShift = 8 * sizeof(S) - 1;
+  using I = std::make_signed_t<U>;  // magnitudes < 2^(bits-1): signed compares (AVX2 has those)
+  static constexpr auto kTaylor = InverseFactorials<S, C::kDegree>();
+  constexpr U kSign = U(1) << (8 * sizeof(S) - 1);
+  constexpr U kMinMagnitude = std::bit_cast<U>(C::kMin) & ~kSign;
+  constexpr U kInf = std::bit_cast<U>(std::numeric_limits<S>::infinity());
+  const U bits = std::bit_cast<U>(x);
+  const U magnitude = bits & ~kSign;
+  const U tiny = U(0) - U(I(magnitude) > I(kMinMagnitude));  // x < kMin or NaN: all ones
+  const U nan = U(0) - U(I(magnitude) > I(kInf));
+  const S clamped = std::bit_cast<S>((bits & ~tiny) | (std::bit_cast<U>(C::kMin) & tiny));
+  const S shifted = clamped * C::kLog2e + C::kShifter;
+  const S n = shifted - C::kShifter;
+  const S r = (clamped - n * C::kLn2Hi) - n * C::kLn2Lo;
+  const U biased = std::bit_cast<U>(shifted) - std::bit_cast<U>(C::kShifter) + U(C::kBias);
+  const U y = std::bit_cast<U>(Horner(kTaylor, r) * std::bit_cast<S>(biased << C::kMantissa));
+  return std::bit_cast<S>((y & ~tiny) | (bits & nan));
+}
+
+// All ones where the sign bit of x is set (negatives, -0, negative NaN), else 0.
+template <typename S>
+inline BitsOf<S> SignMask(S x) {
+  return BitsOf<S>(0) - (std::bit_cast<BitsOf<S>>(x) >> (8 * sizeof(S) - 1));
+}
+
+// mask ? a : b, on the bits.
+template <typename S>
+inline S SelectBits(BitsOf<S> mask, S a, S b) {
+  using U = BitsOf<S>;
+  return std::bit_cast<S>((std::bit_cast<U>(a) & mask) | (std::bit_cast<U>(b) & ~mask));
+}
+
+// log(1 + e) for e in [0, 1] (softplus' log1p(exp(-|z|))), branch free, in the form
+// of fdlibm's log1p: 1 + e = 2^k (1 + f) with k = 0, f = e, or above sqrt(2) - 1 k = 1,
+// f = (e - 1) / 2 (both exact to half an ulp); log(1 + f) = 2 atanh(s), s = f / (2 + f),
+// |s| <= 0.1716, written f - s (f - R) with R = 2 s^2/3 + 2 s^4/5 + ... (to s^20 in
+// double, s^10 in float: the rest below a tenth of an ulp), so s's rounding only touches
+// the small correction; plus k ln 2 in two parts. No 1 + e is rounded: tiny e give e.
+template <typename S>
+inline S Log1pOfUnit(S e) {
+  using U = BitsOf<S>;
+  using I = std::make_signed_t<U>;
+  static constexpr auto kSeries = TwiceAtanhTail<S, ExpConstants<S>::kAtanhTerms>();
+  constexpr U kSplit = std::bit_cast<U>(S(0.41421356237309504880));
+  const U upper = U(0) - U(I(std::bit_cast<U>(e)) > I(kSplit));  // all ones above the split
+  const S f = SelectBits(upper, (e - S(1)) * S(0.5), e);
+  const S s = f / (S(2) + f);
+  const S z = s * s;
+  const S r = z * Horner(kSeries, z);
+  const S k_ln2_hi = std::bit_cast<S>(std::bit_cast<U>(ExpConstants<S>::kLn2Hi) & upper);
+  const S k_ln2_lo = std::bit_cast<S>(std::bit_cast<U>(ExpConstants<S>::kLn2Lo) & upper);
+  return k_ln2_hi + (f - (s * (f - r) - k_ln2_lo));
+}
+
+// For m values z = p a[i]: e[i] = exp(-|z|) in [0, 1] and s[i] = sigmoid(z) =
+// 1 / (1 + exp(-z)), as 1 / (1 + e) for z >= 0 and e / (1 + e) otherwise: no
+// overflow, one division. e and s must not alias a.
+template <typename S>
+inline void SigmoidBlock(const S* __restrict a, S p, Eigen::Index m, S* __restrict e, S* __restrict s) {
+  using U = BitsOf<S>;
+  constexpr U kSign = U(1) << (8 * sizeof(S) - 1);
   for (Eigen::Index i = 0; i < m; ++i) {
-    const U negative = U(0) - (std::bit_cast<U>(z[i]) >> kSignShift);  // all ones or 0
-    const U keep = std::bit_cast<U>(v[i]);
-    const U scaled = std::bit_cast<U>(e[i] * v[i]);
-    v[i] = std::bit_cast<S>((keep & ~negative) | (scaled & negative));
+    const S z = p * a[i];
+    const S ei = ExpOfNonPositive(std::bit_cast<S>(std::bit_cast<U>(z) | kSign));
+    const S positive = S(1) / (S(1) + ei);
+    e[i] = ei;
+    s[i] = SelectBits(SignMask(z), ei * positive, positive);
   }
 }
 
-// For m values z = p a[i] (m <= 64): e[i] = exp(-|z|) in (0, 1] and
-// s[i] = sigmoid(z) = 1 / (1 + exp(-z)), as 1 / (1 + e) for z >= 0 and
-// e / (1 + e) otherwise: no overflow, one division. e and s must not alias a.
+// For m values z = p a[i]: g[i] = softplus(z) / p = (max(z, 0) + log1p(exp(-|z|))) inv_p
+// and s[i] = sigmoid(z) (as SigmoidBlock), in one vectorised pass. g and s must not
+// alias a.
 template <typename S>
-inline void SigmoidBlock(const S* a, S p, Eigen::Index m, S* e, S* s) {
-  using ArrayS = Eigen::Array<S, Eigen::Dynamic, 1>;
-  const Eigen::Map<const ArrayS> av(a, m);
-  Eigen::Map<ArrayS> ev(e, m), sv(s, m);
-  S z[64];
-  Eigen::Map<ArrayS>(z, m) = p * av;
-  ev = (-Eigen::Map<ArrayS>(z, m).abs()).exp();
-  sv = S(1) / (S(1) + ev);
-  MultiplyWhereNegative(z, e, s, m);
+inline void SoftplusBlock(const S* __restrict a, S p, S inv_p, Eigen::Index m, S* __restrict g,
+                          S* __restrict s) {
+  using U = BitsOf<S>;
+  constexpr U kSign = U(1) << (8 * sizeof(S) - 1);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    const S z = p * a[i];
+    const U negative = SignMask(z);
+    const S e = ExpOfNonPositive(std::bit_cast<S>(std::bit_cast<U>(z) | kSign));
+    const S positive = S(1) / (S(1) + e);
+    s[i] = SelectBits(negative, e * positive, positive);
+    g[i] = (SelectBits(negative, S(0), z) + Log1pOfUnit(e)) * inv_p;
+  }
 }
 
 }  // namespace internal
@@ -314,8 +433,9 @@ inline void SigmoidBlock(const S* a, S p, Eigen::Index m, S* e, S* s) {
 /// Batched evaluation over n contiguous pre-activations a[0..n) of S (double or
 /// float): g[i] = g(a[i]), dg[i] = g'(a[i]) and, when ddg is not null,
 /// ddg[i] = g''(a[i]). g may alias a (in-place). dg may be null when only values
-/// are needed. Uses Eigen's vectorised exp; no allocation. In float the
-/// parameter p is rounded to float once.
+/// are needed. Softplus and sigmoid take exp(-|z|) and log1p from
+/// internal::ExpOfNonPositive and Log1pOfUnit (within 2 ulp, in loops the compiler
+/// vectorises); no allocation. In float the parameter p is rounded to float once.
 template <typename S>
 inline void ApplyActivation(const Activation& act, const S* a, Eigen::Index n,
                             std::type_identity_t<S>* g, std::type_identity_t<S>* dg,
@@ -347,19 +467,20 @@ inline void ApplyActivation(const Activation& act, const S* a, Eigen::Index n,
       if (ddg) Arr(ddg, n).setZero();
       return;
     case ActivationKind::kSoftplus: {
-      // z = p a; e = exp(-|z|) in (0, 1]: no overflow; s = sigmoid(z);
-      // g = (max(z, 0) + log(1 + e)) / p.
+      // z = p a; e = exp(-|z|) in [0, 1]: no overflow; s = sigmoid(z);
+      // g = (max(z, 0) + log1p(e)) / p, one vectorised pass per block into local
+      // buffers (g may alias a).
       constexpr Eigen::Index kBlock = 64;
-      S e_buf[kBlock];
+      S g_buf[kBlock];
       S s_buf[kBlock];
+      const S inv_p = one / p;
       for (Eigen::Index start = 0; start < n; start += kBlock) {
         const Eigen::Index m = std::min(kBlock, n - start);
-        internal::SigmoidBlock(a + start, p, m, e_buf, s_buf);
-        const Eigen::Map<const ArrayS> e(e_buf, m);
+        internal::SoftplusBlock(a + start, p, inv_p, m, g_buf, s_buf);
         const Eigen::Map<const ArrayS> sig(s_buf, m);
         if (dg) Arr(dg + start, m) = sig;
         if (ddg) Arr(ddg + start, m) = p * sig * (one - sig);
-        gv.segment(start, m) = ((p * av.segment(start, m)).max(zero) + (one + e).log()) / p;
+        gv.segment(start, m) = Eigen::Map<const ArrayS>(g_buf, m);
       }
       return;
     }
