@@ -7,12 +7,15 @@
 //   diffdyn figures --stored --out figs           # the stored full runs' page, nothing run
 //
 // Figure NAME writes into DIR/NAME/; its program's stdout and stderr go to
-// DIR/tasks/<i>/. Under `mpirun -np N diffdyn figures ...` the figures run on the
-// ranks (as `diffdyn sweep` does) and rank 0 writes the page. The figures to run, their arguments and the numbers the page
-// shows come from paper_figures/figures.json. With --resume, a figure whose
-// run is recorded in DIR with the same arguments is not run again. Speed rows
-// (ours beside PyTorch) come from the stored benchmark comparisons of bench/results/,
-// copied to DIR/bench/.
+// DIR/tasks/<i>/. A figure made of a grid (manifest "grid", "quick_grid") is one task
+// per combination, each into DIR/NAME/parts/<k>/, and its plot script then merges the
+// parts into DIR/NAME/ (logs in DIR/plots/tasks/<j>/). Under `mpirun -np N diffdyn
+// figures ...` the tasks run on the ranks (as `diffdyn sweep` does) and rank 0 merges
+// and writes the page. The figures to run, their arguments and the numbers the page
+// shows come from paper_figures/figures.json. With --resume, a task whose run is
+// recorded in DIR with the same arguments is not run again. Speed rows (ours beside
+// PyTorch) come from the stored benchmark comparisons of bench/results/, copied to
+// DIR/bench/.
 #include <algorithm>
 #include <chrono>
 #include <ctime>
