@@ -117,6 +117,11 @@ SweepTask FigureTask(const FigureEntry& e, const FiguresOptions& o) {
   return task;
 }
 
+// The output folder of part k of a figure run as a grid: DIR/NAME/parts/<k>.
+fs::path PartDir(const FiguresOptions& o, const FigureEntry& e, std::size_t k) {
+  return fs::path(o.out) / e.name / "parts" / std::to_string(k);
+}
+
 // The sweep's tasks: per figure one run with "--out DIR/NAME --plot", or for a
 // figure run as a grid one run per combination with "--out DIR/NAME/parts/<k>".
 std::vector<SweepTask> MakeTasks(const std::vector<const FigureEntry*>& figures, const FiguresOptions& o,
@@ -140,8 +145,7 @@ std::vector<SweepTask> MakeTasks(const std::vector<const FigureEntry*>& figures,
         for (const std::string& v : point.values) values += " " + v;
         task.grid_values = {e->name + values};
         task.args.insert(task.args.end(), point.args.begin(), point.args.end());
-        const std::string part = fmt::format("parts/{}", tasks.size() - span.first);
-        task.args.insert(task.args.end(), {"--out", (folder / part).string()});
+        task.args.insert(task.args.end(), {"--out", PartDir(o, *e, tasks.size() - span.first).string()});
         tasks.push_back(std::move(task));
       }
     }
@@ -154,8 +158,8 @@ std::vector<SweepTask> MakeTasks(const std::vector<const FigureEntry*>& figures,
 
 // Per figure run as a grid whose parts all succeeded: `python plot DIR/NAME
 // DIR/NAME/parts/0 ...`, which merges the parts and draws.
-std::vector<SweepTask> MakePlotTasks(const std::vector<FigureTasks>& spans, const std::vector<SweepTask>& tasks,
-                                     const std::vector<SweepResult>& results, const FiguresOptions& o) {
+std::vector<SweepTask> MakePlotTasks(const std::vector<FigureTasks>& spans, const std::vector<SweepResult>& results,
+                                     const FiguresOptions& o) {
   std::vector<SweepTask> plots;
   for (const FigureTasks& span : spans) {
     bool ok = span.grid;
@@ -167,10 +171,7 @@ std::vector<SweepTask> MakePlotTasks(const std::vector<FigureTasks>& spans, cons
     plot.program = DIFFDYN_PYTHON;
     plot.args = {(fs::path(o.manifest).parent_path() / span.entry->plot).string(),
                  (fs::path(o.out) / span.entry->name).string()};
-    for (std::size_t i = span.first; i < span.first + span.count; ++i) {
-      const std::vector<std::string>& args = tasks[i].args;
-      plot.args.push_back(*(std::find(args.begin(), args.end(), "--out") + 1));
-    }
+    for (std::size_t k = 0; k < span.count; ++k) plot.args.push_back(PartDir(o, *span.entry, k).string());
     plots.push_back(std::move(plot));
   }
   return plots;
@@ -382,7 +383,7 @@ void RunFigures(const FiguresOptions& o, const std::string& invocation) {
   if (!results) return;
 
   // The grids' parts merged and drawn by each figure's plot script, always anew.
-  const std::vector<SweepTask> plots = MakePlotTasks(spans, tasks, *results, o);
+  const std::vector<SweepTask> plots = MakePlotTasks(spans, *results, o);
   const SweepFolder plot_folder(out / "plots");
   for (const SweepTask& t : plots) fs::remove(plot_folder.TaskDir(t.index) / "result.json", ec);
   SweepQueue plot_queue(plots, plot_folder, ProgressPrinter(o, plots.size()));

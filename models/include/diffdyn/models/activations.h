@@ -394,19 +394,30 @@ inline S Log1pOfUnit(S e) {
   return k_ln2_hi + (f - (s * (f - r) - k_ln2_lo));
 }
 
+// exp(-|z|) in [0, 1] (|z| by setting the sign bit).
+template <typename S>
+inline S ExpOfMinusAbs(S z) {
+  constexpr BitsOf<S> kSign = BitsOf<S>(1) << (8 * sizeof(S) - 1);
+  return ExpOfNonPositive(std::bit_cast<S>(std::bit_cast<BitsOf<S>>(z) | kSign));
+}
+
+// sigmoid(z) from e = exp(-|z|): 1 / (1 + e) for z >= 0, e / (1 + e) below (chosen by
+// z's sign bit): no overflow, one division.
+template <typename S>
+inline S SigmoidFromExp(S z, S e) {
+  const S positive = S(1) / (S(1) + e);
+  return SelectBits(SignMask(z), e * positive, positive);
+}
+
 // For m values z = p a[i]: e[i] = exp(-|z|) in [0, 1] and s[i] = sigmoid(z) =
 // 1 / (1 + exp(-z)), as 1 / (1 + e) for z >= 0 and e / (1 + e) otherwise: no
 // overflow, one division. e and s must not alias a.
 template <typename S>
 inline void SigmoidBlock(const S* __restrict a, S p, Eigen::Index m, S* __restrict e, S* __restrict s) {
-  using U = BitsOf<S>;
-  constexpr U kSign = U(1) << (8 * sizeof(S) - 1);
   for (Eigen::Index i = 0; i < m; ++i) {
     const S z = p * a[i];
-    const S ei = ExpOfNonPositive(std::bit_cast<S>(std::bit_cast<U>(z) | kSign));
-    const S positive = S(1) / (S(1) + ei);
-    e[i] = ei;
-    s[i] = SelectBits(SignMask(z), ei * positive, positive);
+    e[i] = ExpOfMinusAbs(z);
+    s[i] = SigmoidFromExp(z, e[i]);
   }
 }
 
@@ -416,15 +427,11 @@ inline void SigmoidBlock(const S* __restrict a, S p, Eigen::Index m, S* __restri
 template <typename S>
 inline void SoftplusBlock(const S* __restrict a, S p, S inv_p, Eigen::Index m, S* __restrict g,
                           S* __restrict s) {
-  using U = BitsOf<S>;
-  constexpr U kSign = U(1) << (8 * sizeof(S) - 1);
   for (Eigen::Index i = 0; i < m; ++i) {
     const S z = p * a[i];
-    const U negative = SignMask(z);
-    const S e = ExpOfNonPositive(std::bit_cast<S>(std::bit_cast<U>(z) | kSign));
-    const S positive = S(1) / (S(1) + e);
-    s[i] = SelectBits(negative, e * positive, positive);
-    g[i] = (SelectBits(negative, S(0), z) + Log1pOfUnit(e)) * inv_p;
+    const S e = ExpOfMinusAbs(z);
+    s[i] = SigmoidFromExp(z, e);
+    g[i] = (SelectBits(SignMask(z), S(0), z) + Log1pOfUnit(e)) * inv_p;
   }
 }
 
