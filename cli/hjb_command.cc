@@ -120,6 +120,10 @@ void RegisterHjbCommand(CLI::App& app) {
   command->add_option("--samples", o->hjb.samples, "Uniform states over the task's domain, drawn per stage")
       ->check(Bounded(2, 1e7))
       ->capture_default_str();
+  command->add_option("--goal-anchor", o->hjb.goal_anchor_weight,
+                      "Weight of the goal's LQR cost-to-go as value anchors in each stage's loss (0: none)")
+      ->check(Bounded(0, 1e6))
+      ->capture_default_str();
   command->add_option("--epochs", o->hjb.train.epochs, "Adam epochs per stage")
       ->check(Bounded(1, 1e6))
       ->capture_default_str();

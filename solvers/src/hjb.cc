@@ -8,6 +8,7 @@
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/models/init.h"
 #include "diffdyn/models/random.h"
+#include "diffdyn/solvers/lqr.h"
 
 namespace diffdyn {
 
@@ -84,6 +85,8 @@ void HjbOptions::Validate() const {
   DIFFDYN_CHECK(polish_stages >= 0 && polish_stages <= 1000, "hjb: polish stages must be in [0, 1000], got ",
                 polish_stages);
   DIFFDYN_CHECK(samples >= 2 && samples <= 10000000, "hjb: samples must be in [2, 1e7], got ", samples);
+  DIFFDYN_CHECK(std::isfinite(goal_anchor_weight) && goal_anchor_weight >= 0,
+                "hjb: the goal anchor weight must be finite and >= 0, got ", goal_anchor_weight);
   DIFFDYN_CHECK(candidates >= 1 && candidates <= 1000, "hjb: candidates must be in [1, 1000], got ", candidates);
   DIFFDYN_CHECK(validation_starts >= 1 && validation_starts <= 100000,
                 "hjb: validation starts must be in [1, 100000], got ", validation_starts);
@@ -104,6 +107,32 @@ ValueFunction MakeTaskValueFunction(const ControlTask& task, const HjbOptions& o
   }
   arch.sizes.push_back(ValueFunction::OutputsFor(ValueForm::kQuadratic, d));
   return ValueFunction::Quadratic(MakeInitializedMlp(arch, InitOptions::Ddn(), options.seed), task.goal, features);
+}
+
+ValueAnchors GoalAnchors(const ControlTask& task, double rho, double weight, double h) {
+  const LqrSolution lqr = TaskLqr(task);
+  const int n = task.state_size();
+  const Eigen::MatrixXd p =
+      SolveLqr(lqr.A - 0.5 * rho * Eigen::MatrixXd::Identity(n, n), lqr.B, lqr.Q, lqr.R).P;
+  // Directions +-e_i, then +-(e_i + e_j) / sqrt(2) and +-(e_i - e_j) / sqrt(2) for i < j.
+  std::vector<Eigen::VectorXd> directions;
+  for (int i = 0; i < n; ++i) directions.push_back(Eigen::VectorXd::Unit(n, i));
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      directions.push_back((Eigen::VectorXd::Unit(n, i) + Eigen::VectorXd::Unit(n, j)) / std::sqrt(2.0));
+      directions.push_back((Eigen::VectorXd::Unit(n, i) - Eigen::VectorXd::Unit(n, j)) / std::sqrt(2.0));
+    }
+  }
+  const Eigen::Index a = 2 * static_cast<Eigen::Index>(directions.size());
+  ValueAnchors anchors{Eigen::MatrixXd(n, a), Eigen::VectorXd(a), Eigen::VectorXd::Constant(a, h * h), weight};
+  for (std::size_t k = 0; k < directions.size(); ++k) {
+    for (int sign : {1, -1}) {
+      const Eigen::Index c = 2 * static_cast<Eigen::Index>(k) + (sign > 0 ? 0 : 1);
+      anchors.states.col(c) = task.goal + (sign * h) * directions[k];
+      anchors.values[c] = h * h * directions[k].dot(p * directions[k]);
+    }
+  }
+  return anchors;
 }
 
 namespace {
@@ -140,7 +169,13 @@ void SolveHjb(const ControlTask& task, const HjbOptions& options, ValueFunction*
     if (k >= options.stages) train.learning_rate /= std::pow(3.0, k - options.stages + 1);
     train.seed = SplitMix64Hash(options.seed * 1000 + static_cast<std::uint64_t>(k));
     const Eigen::MatrixXd states = SampleStates(task, options, static_cast<std::uint64_t>(k));
-    HjbStageReport report{k, total, hjb.rho(), train.learning_rate, SolveResidual(hjb, states, train, value), 0.0};
+    const ValueAnchors anchors = options.goal_anchor_weight > 0
+                                     ? GoalAnchors(task, hjb.rho(), options.goal_anchor_weight)
+                                     : ValueAnchors{};
+    HjbStageReport report{k, total, hjb.rho(), train.learning_rate,
+                          SolveResidual(hjb, states, train, value, {},
+                                        options.goal_anchor_weight > 0 ? &anchors : nullptr),
+                          0.0};
     if (!std::isfinite(report.result.final_train_loss) || !value->net().parameters().allFinite()) {
       throw NumericalError(StrCat("hjb: stage ", k + 1, " (rho ", hjb.rho(), ") diverged: the residual is ",
                                   report.result.final_train_loss, " (try a smaller --lr); nothing written"));

@@ -211,9 +211,26 @@ double ResidualLoss(const FirstOrderEquation& equation, const ValueFunction& val
   return f.squaredNorm() / static_cast<double>(b);
 }
 
+double AnchorLoss(const ValueAnchors& anchors, const ValueFunction& value, Eigen::VectorXd* grad,
+                  ValueWorkspace* ws) {
+  const Eigen::Index a = anchors.states.cols();
+  Eigen::VectorXd v;
+  Eigen::MatrixXd p;
+  value.Evaluate(anchors.states, &v, &p, ws);
+  const Eigen::VectorXd r = (v - anchors.values).cwiseQuotient(anchors.scales);
+  if (grad) {
+    // dL/dV_a = 2 w r_a / (A scale_a); V's gradient p does not enter.
+    const Eigen::VectorXd gv = (2.0 * anchors.weight / static_cast<double>(a)) * r.cwiseQuotient(anchors.scales);
+    Eigen::VectorXd g;
+    value.Backward(anchors.states, gv, Eigen::MatrixXd::Zero(p.rows(), a), &g, ws);
+    *grad += g;
+  }
+  return anchors.weight * r.squaredNorm() / static_cast<double>(a);
+}
+
 TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::MatrixXd& states,
                           const TrainOptions& options, ValueFunction* value,
-                          const std::function<void(const EpochReport&)>& on_epoch) {
+                          const std::function<void(const EpochReport&)>& on_epoch, const ValueAnchors* anchors) {
   const int n = equation.state_size();
   DIFFDYN_CHECK(value->state_size() == n, "SolveResidual: the value function has ", value->state_size(),
                 " states, the equation ", n);
@@ -224,6 +241,13 @@ TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::Matri
   const int batch = std::min<int>(options.batch_size, static_cast<int>(train.size()));
   ValueWorkspace ws = value->MakeWorkspace(batch, options.chunk_size);
   ValueWorkspace val_ws = value->MakeWorkspace(std::max<int>(1, static_cast<int>(val.size())), options.chunk_size);
+  ValueWorkspace anchor_ws = value->MakeWorkspace(anchors ? std::max<int>(1, static_cast<int>(anchors->states.cols())) : 1);
+  if (anchors) {
+    DIFFDYN_CHECK(anchors->states.rows() == n && anchors->values.size() == anchors->states.cols() &&
+                      anchors->scales.size() == anchors->states.cols() && (anchors->scales.array() > 0).all() &&
+                      std::isfinite(anchors->weight) && anchors->weight >= 0,
+                  "SolveResidual: anchors must have n x A states, A values and A positive scales, weight >= 0");
+  }
   const Eigen::MatrixXd val_states = states(Eigen::all, val);
   Eigen::MatrixXd x;
   MinibatchProblem problem;
@@ -234,7 +258,8 @@ TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::Matri
     for (std::size_t i = 0; i < positions.size(); ++i) {
       x.col(static_cast<Eigen::Index>(i)) = states.col(train[static_cast<std::size_t>(positions[i])]);
     }
-    return ResidualLoss(equation, *value, x, grad, &ws, options.threads);
+    const double loss = ResidualLoss(equation, *value, x, grad, &ws, options.threads);
+    return anchors ? loss + AnchorLoss(*anchors, *value, grad, &anchor_ws) : loss;
   };
   problem.validation_loss = [&] {
     return ResidualLoss(equation, *value, val_states, nullptr, &val_ws, options.threads);

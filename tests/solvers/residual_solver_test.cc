@@ -88,6 +88,38 @@ TEST(ResidualLoss, GradientMatchesCentralDifferences) {
   }
 }
 
+// For every form: the anchor term's gradient against central differences in the
+// parameters, and the term is zero when the anchors hold V's own values.
+TEST(AnchorLoss, GradientMatchesCentralDifferencesAndVanishesOnVsOwnValues) {
+  int form = 0;
+  for (ValueFunction value : ValueFunctions(5)) {
+    ValueAnchors anchors{UniformStates(4, 9), Eigen::VectorXd(4), Eigen::VectorXd(4), 0.7};
+    anchors.values << 0.1, 0.5, 1.0, 2.0;
+    anchors.scales << 1.0, 0.5, 2.0, 0.01;
+    ValueWorkspace ws = value.MakeWorkspace(4);
+    Eigen::VectorXd grad = Eigen::VectorXd::Ones(value.net().num_parameters());
+    AnchorLoss(anchors, value, &grad, &ws);
+    grad.array() -= 1.0;  // the term is added to what grad held
+    const double h = 1e-6;
+    double worst = 0.0;
+    Eigen::VectorXd& theta = value.mutable_net()->mutable_parameters();
+    for (Eigen::Index k = 0; k < theta.size(); k += 3) {
+      const double saved = theta[k];
+      theta[k] = saved + h;
+      const double up = AnchorLoss(anchors, value, nullptr, &ws);
+      theta[k] = saved - h;
+      const double down = AnchorLoss(anchors, value, nullptr, &ws);
+      theta[k] = saved;
+      worst = std::max(worst, std::abs((up - down) / (2 * h) - grad[k]) / (1.0 + std::abs(grad[k])));
+    }
+    EXPECT_LT(worst, 1e-6) << "form " << form;
+    EXPECT_GT(grad.norm(), 0.0) << "form " << form;
+    Eigen::MatrixXd p;
+    value.Evaluate(anchors.states, &anchors.values, &p);
+    EXPECT_EQ(AnchorLoss(anchors, value, nullptr, &ws), 0.0) << "form " << form++;
+  }
+}
+
 // For every form: dV/dx against central differences of V in x; periodicity in x_0
 // where it enters as (sin, cos).
 TEST(ValueFunction, GradientMatchesCentralDifferencesOfV) {

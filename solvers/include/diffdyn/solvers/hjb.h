@@ -92,6 +92,8 @@ struct HjbOptions {
   int polish_stages = 2;
   /// Uniform states drawn afresh over the task's domain for each stage.
   int samples = 51200;
+  /// Weight of the goal anchors (GoalAnchors) in each stage's loss; 0 leaves them out.
+  double goal_anchor_weight = 0.0;
   /// Adam per stage (epochs, learning rate, batch, held-out fraction, threads); its
   /// seed is replaced per stage from `seed`.
   TrainOptions train = DefaultTrain();
@@ -119,6 +121,15 @@ struct HjbStageReport {
   /// Wall time of the stage (s).
   double seconds = 0.0;
 };
+
+/// The boundary condition at the goal as value anchors (residual_solver.h): near the goal
+/// the discounted HJB's solution is the LQR cost-to-go of the discounted linearisation,
+/// V(goal + e) = e^T P_rho e + O(|e|^3), P_rho the Riccati solution for (A - rho/2 I, B, Q, R)
+/// (lqr.h). Anchors at e = h d for d = +-e_i and +-(e_i +- e_j)/sqrt(2) (2 n^2 states),
+/// values h^2 d^T P_rho d, scales h^2: they pin V's Hessian at the goal, which the squared
+/// residual, O(|e|^4) there, leaves free. Throws diffdyn::NumericalError when the
+/// discounted linearisation has no stabilising Riccati solution.
+ValueAnchors GoalAnchors(const ControlTask& task, double rho, double weight, double h = 1e-3);
 
 /// The structured value network of the task, initialised from seed (file comment).
 ValueFunction MakeTaskValueFunction(const ControlTask& task, const HjbOptions& options);

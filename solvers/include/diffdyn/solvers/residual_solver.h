@@ -148,13 +148,27 @@ class ValueFunction {
 double ResidualLoss(const FirstOrderEquation& equation, const ValueFunction& value, const Eigen::MatrixXd& x,
                     Eigen::VectorXd* grad, ValueWorkspace* ws, int threads = 1);
 
+/// Known values of V at a few states (a boundary condition), added to the residual loss
+/// as weight * mean_a ((V(x_a) - v_a) / scale_a)^2: states n x A, values and scales A.
+struct ValueAnchors {
+  Eigen::MatrixXd states;
+  Eigen::VectorXd values, scales;
+  double weight = 0.0;
+};
+
+/// The anchor term weight * mean_a ((V(x_a) - v_a) / scale_a)^2 of `anchors` and, if
+/// grad is not null, its gradient added to *grad (the network's parameter count), on ws.
+double AnchorLoss(const ValueAnchors& anchors, const ValueFunction& value, Eigen::VectorXd* grad,
+                  ValueWorkspace* ws);
+
 /// Minimises the mean squared residual over the columns of `states` (n x N; a
-/// seeded fraction options.val_fraction held out) by Adam from the value function's
-/// parameters, in place (file comment). Losses in the result are mean squared
-/// residuals. Throws diffdyn::Error when value's state size is not the equation's or
-/// the options are bad.
+/// seeded fraction options.val_fraction held out), plus the anchor term of `anchors`
+/// if given, by Adam from the value function's parameters, in place (file comment).
+/// Losses in the result are mean squared residuals (the anchor term aside). Throws
+/// diffdyn::Error when value's state size is not the equation's or the options are bad.
 TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::MatrixXd& states,
                           const TrainOptions& options, ValueFunction* value,
-                          const std::function<void(const EpochReport&)>& on_epoch = {});
+                          const std::function<void(const EpochReport&)>& on_epoch = {},
+                          const ValueAnchors* anchors = nullptr);
 
 }  // namespace diffdyn
