@@ -4,7 +4,7 @@
 //   diffdyn hjb --system pendulum --out value.json [--stages 6] [--polish-stages 2]
 //               [--epochs 40] [--samples 51200] [--hidden 96] [--layers 2] [--lr 1e-3]
 //               [--batch 256] [--rho-start 5] [--rho-final 0.0862] [--threads 0] [--seed 0]
-//               [--candidates 1] [--validation-starts 40]
+//               [--candidates 1] [--validation-starts 40] [--goal-anchor 0]
 //   diffdyn control --system pendulum --controller hjb --model value.json --starts 300 --seed 1
 //
 // Each stage prints its discount, held-out residual and wall time (unless --quiet).

@@ -1,5 +1,6 @@
 // diffdyn hjb: the contract's keys, a value file that control --controller hjb reads,
 // per-stage progress, and one-line refusals (exit 2) that write nothing.
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -53,11 +54,26 @@ TEST(Hjb, WritesAValueFileThatControlUses) {
   }
 }
 
+// Goal anchors change the training (a different residual, a different file) and
+// keep its report.
+TEST(Hjb, GoalAnchorsEnterTheTraining) {
+  const std::string plain = TempPath("hjb_plain.json"), anchored = TempPath("hjb_anchored.json");
+  const auto p = RunDiffdyn(std::string("hjb --quiet --json --out ") + plain + " " + kSmall);
+  const auto a = RunDiffdyn(std::string("hjb --quiet --json --goal-anchor 5 --out ") + anchored + " " + kSmall);
+  ASSERT_EQ(p.exit_code, 0) << p.err;
+  ASSERT_EQ(a.exit_code, 0) << a.err;
+  const double rp = nlohmann::json::parse(p.out)["final_residual"].get<double>();
+  const double ra = nlohmann::json::parse(a.out)["final_residual"].get<double>();
+  EXPECT_TRUE(std::isfinite(ra));
+  EXPECT_NE(rp, ra);
+}
+
 TEST(Hjb, RefusesBadOptionsAndWritesNothing) {
   const std::string value = TempPath("hjb_refused.json");
   std::filesystem::remove(value);
   for (const char* bad : {"--system pushing", "--rho-final 2 --rho-start 1", "--stages 0", "--samples 1",
-                          "--epochs nan", "--hidden 0", "--layers 17", "--lr -1"}) {
+                          "--epochs nan", "--hidden 0", "--layers 17", "--lr -1", "--goal-anchor -1",
+                          "--goal-anchor inf"}) {
     const auto r = RunDiffdyn(std::string("hjb --quiet --samples 50 --epochs 1 --out ") + value + " " + bad);
     EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.err;
     EXPECT_EQ(CountLines(r.err), 1) << r.err;

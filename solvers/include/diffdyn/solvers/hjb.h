@@ -25,7 +25,10 @@
 // (short-sighted, an easy equation) to the task's small one, rho_k geometric from
 // rho_start to rho_final over `stages` stages, each a residual minimisation from the
 // previous stage's parameters on fresh uniform states; `polish_stages` more at
-// rho_final divide the learning rate by 3 each. HjbController then acts by
+// rho_final divide the learning rate by 3 each. The squared residual is O(|x - goal|^4)
+// near the goal, so it leaves V's Hessian there nearly free; with goal_anchor_weight > 0
+// each stage's loss also holds V near the goal to the discounted LQR cost-to-go
+// (GoalAnchors), the second-order solution of the same equation. HjbController then acts by
 // u = u*(x, dV/dx(x)): one network pass per command, no replanning.
 //
 //   const ControlTask task = ControlTaskByName("pendulum");
