@@ -72,6 +72,7 @@ TrainOptions HjbOptions::DefaultTrain() {
   t.learning_rate = 1e-3;
   t.batch_size = 256;
   t.val_fraction = 0.05;
+  t.chunk_size = 64;  // 4 chunks per batch of 256: both threads busy
   t.progress = false;
   return t;
 }

@@ -97,8 +97,9 @@ struct HjbOptions {
   int samples = 51200;
   /// Weight of the goal anchors (GoalAnchors) in each stage's loss; 0 leaves them out.
   double goal_anchor_weight = 0.0;
-  /// Adam per stage (epochs, learning rate, batch, held-out fraction, threads); its
-  /// seed is replaced per stage from `seed`.
+  /// Adam per stage (epochs, learning rate, batch, held-out fraction, chunk, threads);
+  /// its seed is replaced per stage from `seed`. The chunk (64 states) splits a batch
+  /// of 256 evenly over two threads.
   TrainOptions train = DefaultTrain();
   /// Seeds the network's initial parameters and the states.
   std::uint64_t seed = 0;
