@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/models/init.h"
@@ -170,13 +171,12 @@ void SolveHjb(const ControlTask& task, const HjbOptions& options, ValueFunction*
     if (k >= options.stages) train.learning_rate /= std::pow(3.0, k - options.stages + 1);
     train.seed = SplitMix64Hash(options.seed * 1000 + static_cast<std::uint64_t>(k));
     const Eigen::MatrixXd states = SampleStates(task, options, static_cast<std::uint64_t>(k));
-    const ValueAnchors anchors = options.goal_anchor_weight > 0
-                                     ? GoalAnchors(task, hjb.rho(), options.goal_anchor_weight)
-                                     : ValueAnchors{};
+    const std::optional<ValueAnchors> anchors =
+        options.goal_anchor_weight > 0
+            ? std::optional(GoalAnchors(task, hjb.rho(), options.goal_anchor_weight))
+            : std::nullopt;
     HjbStageReport report{k, total, hjb.rho(), train.learning_rate,
-                          SolveResidual(hjb, states, train, value, {},
-                                        options.goal_anchor_weight > 0 ? &anchors : nullptr),
-                          0.0};
+                          SolveResidual(hjb, states, train, value, {}, anchors ? &*anchors : nullptr), 0.0};
     if (!std::isfinite(report.result.final_train_loss) || !value->net().parameters().allFinite()) {
       throw NumericalError(StrCat("hjb: stage ", k + 1, " (rho ", hjb.rho(), ") diverged: the residual is ",
                                   report.result.final_train_loss, " (try a smaller --lr); nothing written"));

@@ -49,6 +49,25 @@ std::vector<ValueFunction> ValueFunctions(std::uint64_t seed) {
           ValueFunction::Quadratic(net(3, 6), goal, InputFeatures{{0}}), ValueFunction::Quadratic(net(2, 3), goal)};
 }
 
+// The largest error of grad against central differences of loss() over every third
+// parameter of value, relative to 1 + |grad_k|.
+template <typename Loss>
+double WorstCentralDifference(ValueFunction* value, const Eigen::VectorXd& grad, Loss loss) {
+  const double h = 1e-6;
+  double worst = 0.0;
+  Eigen::VectorXd& theta = value->mutable_net()->mutable_parameters();
+  for (Eigen::Index k = 0; k < theta.size(); k += 3) {
+    const double saved = theta[k];
+    theta[k] = saved + h;
+    const double up = loss();
+    theta[k] = saved - h;
+    const double down = loss();
+    theta[k] = saved;
+    worst = std::max(worst, std::abs((up - down) / (2 * h) - grad[k]) / (1.0 + std::abs(grad[k])));
+  }
+  return worst;
+}
+
 TEST(LinearQuadraticHjb, QuadraticSolutionHasZeroResidual) {
   const LinearQuadraticHjb equation = Oscillator();
   const Eigen::MatrixXd p = equation.SolutionMatrix();
@@ -72,18 +91,8 @@ TEST(ResidualLoss, GradientMatchesCentralDifferences) {
     ValueWorkspace ws = value.MakeWorkspace(7);
     Eigen::VectorXd grad;
     ResidualLoss(equation, value, x, &grad, &ws);
-    const double h = 1e-6;
-    double worst = 0.0;
-    Eigen::VectorXd& theta = value.mutable_net()->mutable_parameters();
-    for (Eigen::Index k = 0; k < theta.size(); k += 3) {
-      const double saved = theta[k];
-      theta[k] = saved + h;
-      const double up = ResidualLoss(equation, value, x, nullptr, &ws);
-      theta[k] = saved - h;
-      const double down = ResidualLoss(equation, value, x, nullptr, &ws);
-      theta[k] = saved;
-      worst = std::max(worst, std::abs((up - down) / (2 * h) - grad[k]) / (1.0 + std::abs(grad[k])));
-    }
+    const double worst =
+        WorstCentralDifference(&value, grad, [&] { return ResidualLoss(equation, value, x, nullptr, &ws); });
     EXPECT_LT(worst, 1e-6) << "form " << form++;
   }
 }
@@ -100,18 +109,8 @@ TEST(AnchorLoss, GradientMatchesCentralDifferencesAndVanishesOnVsOwnValues) {
     Eigen::VectorXd grad = Eigen::VectorXd::Ones(value.net().num_parameters());
     AnchorLoss(anchors, value, &grad, &ws);
     grad.array() -= 1.0;  // the term is added to what grad held
-    const double h = 1e-6;
-    double worst = 0.0;
-    Eigen::VectorXd& theta = value.mutable_net()->mutable_parameters();
-    for (Eigen::Index k = 0; k < theta.size(); k += 3) {
-      const double saved = theta[k];
-      theta[k] = saved + h;
-      const double up = AnchorLoss(anchors, value, nullptr, &ws);
-      theta[k] = saved - h;
-      const double down = AnchorLoss(anchors, value, nullptr, &ws);
-      theta[k] = saved;
-      worst = std::max(worst, std::abs((up - down) / (2 * h) - grad[k]) / (1.0 + std::abs(grad[k])));
-    }
+    const double worst =
+        WorstCentralDifference(&value, grad, [&] { return AnchorLoss(anchors, value, nullptr, &ws); });
     EXPECT_LT(worst, 1e-6) << "form " << form;
     EXPECT_GT(grad.norm(), 0.0) << "form " << form;
     Eigen::MatrixXd p;
