@@ -5,6 +5,8 @@
 //               [--epochs 40] [--samples 51200] [--hidden 96] [--layers 2] [--lr 1e-3]
 //               [--batch 256] [--rho-start 5] [--rho-final 0.0862] [--threads 0] [--seed 0]
 //               [--candidates 1] [--validation-starts 40] [--goal-anchor 0]
+//               [--rollout-stages 3] [--rollout-starts 64] [--rollout-weight 10]
+//               [--rollout-epochs 20] [--rollout-lr 1e-4]
 //   diffdyn control --system pendulum --controller hjb --model value.json --starts 300 --seed 1
 //
 // Each stage prints its discount, held-out residual and wall time (unless --quiet).
@@ -72,10 +74,11 @@ void RunHjb(HjbCommandOptions o) {
                                      {"seed", o.common.seed},           {"samples", o.hjb.samples},
                                      {"epochs", o.hjb.train.epochs},    {"lr", o.hjb.train.learning_rate},
                                      {"batch", o.hjb.train.batch_size}, {"rho_start", o.hjb.rho_start},
-                                     {"rho_final", o.hjb.rho_final},    {"stages", stages},
+                                     {"rho_final", o.hjb.rho_final},    {"rollout_stages", o.hjb.rollout_stages},
+                                     {"rollout_weight", o.hjb.rollout_weight}, {"stages", stages},
                                      {"candidates", candidates}};
   SaveValueFunction(o.out, value, o.system, provenance, {{"final_residual", residual}, {"seconds", seconds}});
-  const int total = o.hjb.stages + o.hjb.polish_stages;
+  const int total = o.hjb.stages + o.hjb.polish_stages + o.hjb.rollout_stages;
   if (o.common.json) {
     PrintJson({{"model_path", o.out},
                {"stages", total},
@@ -123,6 +126,22 @@ void RegisterHjbCommand(CLI::App& app) {
   command->add_option("--goal-anchor", o->hjb.goal_anchor_weight,
                       "Weight of the goal's LQR cost-to-go as value anchors in each stage's loss (0: none)")
       ->check(Bounded(0, 1e6))
+      ->capture_default_str();
+  command->add_option("--rollout-stages", o->hjb.rollout_stages,
+                      "Stages after the polish whose loss also holds V to the policy's own discounted costs-to-go")
+      ->check(Bounded(0, 1000))
+      ->capture_default_str();
+  command->add_option("--rollout-starts", o->hjb.rollout_starts, "Policy runs per rollout stage")
+      ->check(Bounded(1, 100000))
+      ->capture_default_str();
+  command->add_option("--rollout-weight", o->hjb.rollout_weight, "Weight of the rollout stages' value targets")
+      ->check(Bounded(0, 1e6))
+      ->capture_default_str();
+  command->add_option("--rollout-epochs", o->hjb.rollout_epochs, "Adam epochs per rollout stage")
+      ->check(Bounded(1, 1e6))
+      ->capture_default_str();
+  command->add_option("--rollout-lr", o->hjb.rollout_learning_rate, "Adam learning rate of the rollout stages")
+      ->check(Bounded(1e-12, 10))
       ->capture_default_str();
   command->add_option("--epochs", o->hjb.train.epochs, "Adam epochs per stage")
       ->check(Bounded(1, 1e6))

@@ -175,7 +175,7 @@ void Run(const FigureOptions& o) {
     }
   });
   std::printf("value function: %d stages, %.0f s of training (wall, --threads %d)\n",
-              o.hjb.stages + o.hjb.polish_stages, train_seconds, o.threads);
+              o.hjb.stages + o.hjb.polish_stages + o.hjb.rollout_stages, train_seconds, o.threads);
   WriteFileAtomically(out / "grid.csv", [&](std::ostream& f) { f << grid.str(); });
   WriteFileAtomically(out / "stages.csv", [&](std::ostream& f) { f << stages.str(); });
   SaveValueFunction(out / "value.json", value, "pendulum", {{"command", "figure_hjb_pendulum"}, {"seed", o.hjb.seed}});
@@ -218,6 +218,9 @@ int main(int argc, char** argv) {
     o.hjb.hidden = {16, 16};
     o.hjb.stages = 3;
     o.hjb.polish_stages = 0;
+    o.hjb.rollout_stages = 1;
+    o.hjb.rollout_starts = 2;
+    o.hjb.rollout_epochs = 1;
     o.hjb.samples = 1000;
     o.hjb.train.epochs = 2;
   }

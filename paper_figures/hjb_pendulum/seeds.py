@@ -59,7 +59,8 @@ def main():
 
     trained = sweep(args.diffdyn, args.out, "hjb", {
         "command": "hjb", "options": {"--system": "pendulum", "--threads": 2, "--quiet": True,
-                                      **({"--stages": 1, "--polish-stages": 0, "--epochs": 1, "--samples": 1000}
+                                      **({"--stages": 1, "--polish-stages": 0, "--epochs": 1, "--samples": 1000,
+                                           "--rollout-starts": 2, "--rollout-epochs": 1}
                                          if args.quick else {})},
         "grid": {"--seed": list(range(args.seeds))}})
     models = [str(args.out / out_of(t)) for t in trained]

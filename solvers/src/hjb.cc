@@ -89,6 +89,16 @@ void HjbOptions::Validate() const {
   DIFFDYN_CHECK(samples >= 2 && samples <= 10000000, "hjb: samples must be in [2, 1e7], got ", samples);
   DIFFDYN_CHECK(std::isfinite(goal_anchor_weight) && goal_anchor_weight >= 0,
                 "hjb: the goal anchor weight must be finite and >= 0, got ", goal_anchor_weight);
+  DIFFDYN_CHECK(rollout_stages >= 0 && rollout_stages <= 1000, "hjb: rollout stages must be in [0, 1000], got ",
+                rollout_stages);
+  DIFFDYN_CHECK(rollout_starts >= 1 && rollout_starts <= 100000, "hjb: rollout starts must be in [1, 100000], got ",
+                rollout_starts);
+  DIFFDYN_CHECK(std::isfinite(rollout_weight) && rollout_weight >= 0,
+                "hjb: the rollout weight must be finite and >= 0, got ", rollout_weight);
+  DIFFDYN_CHECK(rollout_epochs >= 1 && rollout_epochs <= 1000000, "hjb: rollout epochs must be in [1, 1e6], got ",
+                rollout_epochs);
+  DIFFDYN_CHECK(std::isfinite(rollout_learning_rate) && rollout_learning_rate > 0,
+                "hjb: the rollout learning rate must be finite and > 0, got ", rollout_learning_rate);
   DIFFDYN_CHECK(candidates >= 1 && candidates <= 1000, "hjb: candidates must be in [1, 1000], got ", candidates);
   DIFFDYN_CHECK(validation_starts >= 1 && validation_starts <= 100000,
                 "hjb: validation starts must be in [1, 100000], got ", validation_starts);
@@ -137,6 +147,43 @@ ValueAnchors GoalAnchors(const ControlTask& task, double rho, double weight, dou
   return anchors;
 }
 
+ValueAnchors RolloutAnchors(const ControlTask& task, const ValueFunction& value, double rho, double weight,
+                            int starts, std::uint64_t seed, int threads) {
+  HjbController controller(task, value);
+  const std::vector<ControlRun> runs =
+      EvaluateController(task, controller, {.starts = starts, .seed = seed, .threads = threads});
+  Eigen::Index total = 0;
+  for (const ControlRun& run : runs) total += run.trajectory.states.cols() - 1;
+  const int n = task.state_size();
+  ValueAnchors anchors{Eigen::MatrixXd(n, total), Eigen::VectorXd(total), Eigen::VectorXd::Ones(total), weight, 256};
+  const double decay = std::exp(-rho * task.period);
+  Eigen::Index c = 0;
+  for (const ControlRun& run : runs) {
+    // Backwards from V at the last state: G_k = T c_k + e^{-rho T} G_{k+1}.
+    const Eigen::MatrixXd& x = run.trajectory.states;
+    const Eigen::MatrixXd& u = run.trajectory.actions;
+    const Eigen::Index steps = x.cols() - 1;
+    Eigen::VectorXd v;
+    Eigen::MatrixXd p;
+    value.Evaluate(x.col(steps), &v, &p);
+    double g = v[0];
+    for (Eigen::Index k = steps - 1; k >= 0; --k) {
+      g = task.period * task.RunningCost(x.col(k), u.col(k)) + decay * g;
+      anchors.states.col(c + k) = x.col(k);
+      anchors.values[c + k] = g;
+    }
+    c += steps;
+  }
+  // A seeded order, so that each mini-batch sees states of many runs.
+  std::vector<Eigen::Index> order(static_cast<std::size_t>(total));
+  for (Eigen::Index i = 0; i < total; ++i) order[static_cast<std::size_t>(i)] = i;
+  Rng rng = TrajectoryRng(seed, 0);
+  Shuffle(order.begin(), order.end(), rng);
+  anchors.states = anchors.states(Eigen::all, order).eval();
+  anchors.values = anchors.values(order).eval();
+  return anchors;
+}
+
 namespace {
 
 // Fresh uniform states over the task's domain for stage k.
@@ -161,20 +208,32 @@ void SolveHjb(const ControlTask& task, const HjbOptions& options, ValueFunction*
                     task.domain_high.allFinite() && (task.domain_low.array() < task.domain_high.array()).all(),
                 "hjb: the task has no finite state domain to learn over");
   TaskHjb hjb(task, options.rho_start);
-  const int total = options.stages + options.polish_stages;
+  const int total = options.stages + options.polish_stages + options.rollout_stages;
   for (int k = 0; k < total; ++k) {
     const auto start = std::chrono::steady_clock::now();
     // The discount of stage k (geometric, then held) and its learning rate.
     const double fraction = options.stages == 1 ? 1.0 : std::min(1.0, k / double(options.stages - 1));
     hjb.set_rho(options.rho_start * std::pow(options.rho_final / options.rho_start, fraction));
+    const bool rollout = k >= options.stages + options.polish_stages;
     TrainOptions train = options.train;
-    if (k >= options.stages) train.learning_rate /= std::pow(3.0, k - options.stages + 1);
+    if (rollout) {
+      train.epochs = options.rollout_epochs;
+      train.learning_rate = options.rollout_learning_rate;
+    } else if (k >= options.stages) {
+      train.learning_rate /= std::pow(3.0, k - options.stages + 1);
+    }
     train.seed = SplitMix64Hash(options.seed * 1000 + static_cast<std::uint64_t>(k));
     const Eigen::MatrixXd states = SampleStates(task, options, static_cast<std::uint64_t>(k));
-    const std::optional<ValueAnchors> anchors =
+    std::optional<ValueAnchors> anchors =
         options.goal_anchor_weight > 0
             ? std::optional(GoalAnchors(task, hjb.rho(), options.goal_anchor_weight))
             : std::nullopt;
+    if (rollout) {
+      // The current policy's runs from starts of their own seed (apart from any evaluation's).
+      anchors = RolloutAnchors(task, *value, hjb.rho(), options.rollout_weight, options.rollout_starts,
+                               SplitMix64Hash(options.seed * 1000 + static_cast<std::uint64_t>(k) + 777),
+                               options.train.threads);
+    }
     HjbStageReport report{k, total, hjb.rho(), train.learning_rate,
                           SolveResidual(hjb, states, train, value, {}, anchors ? &*anchors : nullptr), 0.0};
     if (!std::isfinite(report.result.final_train_loss) || !value->net().parameters().allFinite()) {

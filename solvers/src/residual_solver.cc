@@ -241,13 +241,34 @@ TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::Matri
   const int batch = std::min<int>(options.batch_size, static_cast<int>(train.size()));
   ValueWorkspace ws = value->MakeWorkspace(batch, options.chunk_size);
   ValueWorkspace val_ws = value->MakeWorkspace(std::max<int>(1, static_cast<int>(val.size())), options.chunk_size);
-  ValueWorkspace anchor_ws = value->MakeWorkspace(anchors ? std::max<int>(1, static_cast<int>(anchors->states.cols())) : 1);
   if (anchors) {
-    DIFFDYN_CHECK(anchors->states.rows() == n && anchors->values.size() == anchors->states.cols() &&
+    DIFFDYN_CHECK(anchors->states.rows() == n && anchors->states.cols() >= 1 &&
+                      anchors->values.size() == anchors->states.cols() &&
                       anchors->scales.size() == anchors->states.cols() && (anchors->scales.array() > 0).all() &&
-                      std::isfinite(anchors->weight) && anchors->weight >= 0,
-                  "SolveResidual: anchors must have n x A states, A values and A positive scales, weight >= 0");
+                      std::isfinite(anchors->weight) && anchors->weight >= 0 && anchors->batch >= 0,
+                  "SolveResidual: anchors must have n x A states (A >= 1), A values and A positive scales, "
+                  "weight >= 0 and batch >= 0");
   }
+  // The anchors of one mini-batch: all of them, or the next `batch` columns in turn.
+  const Eigen::Index anchor_count = anchors ? anchors->states.cols() : 0;
+  const Eigen::Index anchor_batch =
+      anchors && anchors->batch > 0 ? std::min<Eigen::Index>(anchors->batch, anchor_count) : anchor_count;
+  ValueAnchors slice;
+  if (anchors && anchor_batch < anchor_count) {
+    slice = {Eigen::MatrixXd(n, anchor_batch), Eigen::VectorXd(anchor_batch), Eigen::VectorXd(anchor_batch),
+             anchors->weight, 0};
+  }
+  Eigen::Index anchor_next = 0;
+  const auto next_anchors = [&]() -> const ValueAnchors& {
+    if (anchor_batch == anchor_count) return *anchors;
+    for (Eigen::Index c = 0; c < anchor_batch; ++c, anchor_next = (anchor_next + 1) % anchor_count) {
+      slice.states.col(c) = anchors->states.col(anchor_next);
+      slice.values[c] = anchors->values[anchor_next];
+      slice.scales[c] = anchors->scales[anchor_next];
+    }
+    return slice;
+  };
+  ValueWorkspace anchor_ws = value->MakeWorkspace(std::max<int>(1, static_cast<int>(anchor_batch)));
   const Eigen::MatrixXd val_states = states(Eigen::all, val);
   Eigen::MatrixXd x;
   MinibatchProblem problem;
@@ -259,7 +280,7 @@ TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::Matri
       x.col(static_cast<Eigen::Index>(i)) = states.col(train[static_cast<std::size_t>(positions[i])]);
     }
     const double loss = ResidualLoss(equation, *value, x, grad, &ws, options.threads);
-    return anchors ? loss + AnchorLoss(*anchors, *value, grad, &anchor_ws) : loss;
+    return anchors ? loss + AnchorLoss(next_anchors(), *value, grad, &anchor_ws) : loss;
   };
   problem.validation_loss = [&] {
     return ResidualLoss(equation, *value, val_states, nullptr, &val_ws, options.threads);

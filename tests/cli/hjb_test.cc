@@ -18,7 +18,7 @@ using testing::RunDiffdyn;
 using testing::TempPath;
 
 constexpr const char* kSmall = "--stages 2 --polish-stages 0 --samples 500 --epochs 2 --hidden 8 --rho-start 1 "
-                               "--rho-final 0.5 --seed 2 ";
+                               "--rho-final 0.5 --rollout-stages 0 --seed 2 ";
 
 TEST(Hjb, WritesAValueFileThatControlUses) {
   const std::string value = TempPath("hjb_value.json");
@@ -68,12 +68,30 @@ TEST(Hjb, GoalAnchorsEnterTheTraining) {
   EXPECT_NE(rp, ra);
 }
 
+// Rollout stages run after the homotopy (one progress line each, counted in "stages")
+// and change the value function.
+TEST(Hjb, RolloutStagesEnterTheTraining) {
+  const std::string plain = TempPath("hjb_plain2.json"), rolled = TempPath("hjb_rolled.json");
+  const auto p = RunDiffdyn(std::string("hjb --quiet --json --out ") + plain + " " + kSmall);
+  std::string small = kSmall;
+  small.replace(small.find("--rollout-stages 0"), 18, "--rollout-stages 1");
+  const auto r = RunDiffdyn(std::string("hjb --json --out ") + rolled + " " + small +
+                            "--rollout-starts 2 --rollout-epochs 1 --rollout-lr 1e-3");
+  ASSERT_EQ(p.exit_code, 0) << p.err;
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["stages"].get<int>(), 3);
+  EXPECT_EQ(CountLines(r.err), 3) << r.err;
+  EXPECT_NE(nlohmann::json::parse(p.out)["final_residual"].get<double>(), j["final_residual"].get<double>());
+}
+
 TEST(Hjb, RefusesBadOptionsAndWritesNothing) {
   const std::string value = TempPath("hjb_refused.json");
   std::filesystem::remove(value);
   for (const char* bad : {"--system pushing", "--rho-final 2 --rho-start 1", "--stages 0", "--samples 1",
                           "--epochs nan", "--hidden 0", "--layers 17", "--lr -1", "--goal-anchor -1",
-                          "--goal-anchor inf"}) {
+                          "--goal-anchor inf", "--rollout-stages -1", "--rollout-starts 0", "--rollout-weight nan",
+                          "--rollout-epochs 0", "--rollout-lr 0"}) {
     const auto r = RunDiffdyn(std::string("hjb --quiet --samples 50 --epochs 1 --out ") + value + " " + bad);
     EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.err;
     EXPECT_EQ(CountLines(r.err), 1) << r.err;

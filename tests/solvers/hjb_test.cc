@@ -96,6 +96,7 @@ HjbOptions SmallHjb(int threads) {
   o.hidden = {16, 16};
   o.stages = 2;
   o.polish_stages = 1;
+  o.rollout_stages = 0;
   o.samples = 2000;
   o.rho_start = 2.0;
   o.rho_final = 0.5;
@@ -103,6 +104,78 @@ HjbOptions SmallHjb(int threads) {
   o.train.threads = threads;
   o.seed = 3;
   return o;
+}
+
+// Each rollout anchor is the discounted cost-to-go of a run of the value's policy from
+// its state: at the run's first state, summed forwards here,
+//   G_0 = sum_k e^{-rho k T} T c(x_k, u_k) + e^{-rho K T} V(x_K),
+// and G_k - e^{-rho T} G_{k+1} = T c(x_k, u_k) along the run.
+TEST(RolloutAnchors, AreTheDiscountedCostsToGoOfThePolicysRuns) {
+  const ControlTask task = ControlTaskByName("pendulum");
+  ValueFunction value = MakeTaskValueFunction(task, SmallHjb(1));
+  SolveHjb(task, SmallHjb(1), &value);
+  const double rho = 0.3;
+  const ValueAnchors anchors = RolloutAnchors(task, value, rho, 4.0, 2, 11);
+  HjbController controller(task, value);
+  const std::vector<ControlRun> runs = EvaluateController(task, controller, {.starts = 2, .seed = 11});
+  ASSERT_EQ(anchors.states.cols(), 2 * task.periods());
+  EXPECT_EQ(anchors.weight, 4.0);
+  EXPECT_EQ(anchors.batch, 256);
+  EXPECT_EQ(anchors.scales, Eigen::VectorXd::Ones(anchors.states.cols()));
+  // The anchor whose state is x (the states of two runs differ).
+  const auto anchor_at = [&](const Eigen::VectorXd& x) {
+    Eigen::Index found = -1;
+    for (Eigen::Index c = 0; c < anchors.states.cols(); ++c) found = anchors.states.col(c) == x ? c : found;
+    return found;
+  };
+  for (const ControlRun& run : runs) {
+    const Eigen::MatrixXd& x = run.trajectory.states;
+    const Eigen::Index steps = x.cols() - 1;
+    double g0 = 0.0;
+    for (Eigen::Index k = 0; k < steps; ++k) {
+      g0 += std::exp(-rho * k * task.period) * task.period * task.RunningCost(x.col(k), run.trajectory.actions.col(k));
+    }
+    Eigen::VectorXd v;
+    Eigen::MatrixXd p;
+    value.Evaluate(x.col(steps), &v, &p);
+    g0 += std::exp(-rho * steps * task.period) * v[0];
+    const Eigen::Index first = anchor_at(x.col(0));
+    ASSERT_GE(first, 0);
+    EXPECT_NEAR(anchors.values[first], g0, 1e-9 * g0);
+    for (Eigen::Index k : {Eigen::Index{0}, steps / 2, steps - 2}) {
+      const Eigen::Index a = anchor_at(x.col(k)), b = anchor_at(x.col(k + 1));
+      ASSERT_GE(a, 0);
+      ASSERT_GE(b, 0);
+      EXPECT_NEAR(anchors.values[a] - std::exp(-rho * task.period) * anchors.values[b],
+                  task.period * task.RunningCost(x.col(k), run.trajectory.actions.col(k)), 1e-9 * g0);
+    }
+  }
+}
+
+// A rollout stage moves V towards the policy's costs-to-go, also at the states of
+// runs from other starts than its own (held out): their mean squared error falls.
+TEST(SolveHjb, RolloutStagesFitThePolicysCostsToGo) {
+  const ControlTask task = ControlTaskByName("pendulum");
+  HjbOptions o = SmallHjb(1);
+  ValueFunction before = MakeTaskValueFunction(task, o);
+  SolveHjb(task, o, &before);
+  o.rollout_stages = 1;
+  o.rollout_starts = 16;
+  o.rollout_epochs = 10;
+  o.rollout_learning_rate = 1e-3;
+  std::vector<HjbStageReport> reports;
+  ValueFunction after = MakeTaskValueFunction(task, o);
+  SolveHjb(task, o, &after, [&](const HjbStageReport& r) { reports.push_back(r); });
+  ASSERT_EQ(reports.size(), 4u);
+  EXPECT_EQ(reports[3].learning_rate, 1e-3);
+  EXPECT_EQ(reports[3].result.epochs.size(), 10u);
+  EXPECT_NEAR(reports[3].rho, o.rho_final, 1e-12);
+  ValueAnchors held_out = RolloutAnchors(task, before, o.rho_final, 1.0, 16, 12345);
+  held_out.batch = 0;
+  ValueWorkspace ws = before.MakeWorkspace(static_cast<int>(held_out.states.cols()));
+  const double error_before = AnchorLoss(held_out, before, nullptr, &ws);
+  const double error_after = AnchorLoss(held_out, after, nullptr, &ws);
+  EXPECT_LT(error_after, 0.7 * error_before) << error_before << " -> " << error_after;
 }
 
 // The goal anchors' values are h^2 d^T P d for a P that solves the discounted Riccati
@@ -257,6 +330,16 @@ TEST(SolveHjb, RefusesBadOptions) {
   EXPECT_THROW(LearnTaskValue(task, o), Error);
   o = SmallHjb(1);
   o.goal_anchor_weight = -1.0;
+  EXPECT_THROW(SolveHjb(task, o, &value), Error);
+  o = SmallHjb(1);
+  o.rollout_stages = 1;
+  o.rollout_weight = std::nan("");
+  EXPECT_THROW(SolveHjb(task, o, &value), Error);
+  o.rollout_weight = 1.0;
+  o.rollout_starts = 0;
+  EXPECT_THROW(SolveHjb(task, o, &value), Error);
+  o.rollout_starts = 4;
+  o.rollout_learning_rate = 0.0;
   EXPECT_THROW(SolveHjb(task, o, &value), Error);
 }
 

@@ -28,8 +28,13 @@
 // rho_final divide the learning rate by 3 each. The squared residual is O(|x - goal|^4)
 // near the goal, so it leaves V's Hessian there nearly free; with goal_anchor_weight > 0
 // each stage's loss also holds V near the goal to the discounted LQR cost-to-go
-// (GoalAnchors), the second-order solution of the same equation. HjbController then acts by
-// u = u*(x, dV/dx(x)): one network pass per command, no replanning.
+// (GoalAnchors), the second-order solution of the same equation. `rollout_stages` more
+// at rho_final then evaluate the current policy where it goes (one step of policy
+// iteration each): the policy runs from seeded starts of the task, and each visited
+// state's discounted cost-to-go along its run (RolloutAnchors) is a value target beside
+// the residual, so that V, whose gradient is the policy, also matches what the policy
+// costs. HjbController then acts by u = u*(x, dV/dx(x)): one network pass per command,
+// no replanning.
 //
 //   const ControlTask task = ControlTaskByName("pendulum");
 //   ValueFunction value = SolveHjb(task, HjbOptions{});
@@ -97,6 +102,15 @@ struct HjbOptions {
   int samples = 51200;
   /// Weight of the goal anchors (GoalAnchors) in each stage's loss; 0 leaves them out.
   double goal_anchor_weight = 0.0;
+  /// Policy-evaluation stages after the polish, at rho_final (RolloutAnchors): each runs
+  /// the current policy from `rollout_starts` starts of the task and adds the runs'
+  /// discounted costs-to-go as value targets of weight `rollout_weight` to its residual
+  /// loss, for `rollout_epochs` epochs of Adam at `rollout_learning_rate`.
+  int rollout_stages = 3;
+  int rollout_starts = 64;
+  double rollout_weight = 10.0;
+  int rollout_epochs = 20;
+  double rollout_learning_rate = 1e-4;
   /// Adam per stage (epochs, learning rate, batch, held-out fraction, chunk, threads);
   /// its seed is replaced per stage from `seed`. The chunk (64 states) splits a batch
   /// of 256 evenly over two threads.
@@ -134,6 +148,14 @@ struct HjbStageReport {
 /// residual, O(|e|^4) there, leaves free. Throws diffdyn::NumericalError when the
 /// discounted linearisation has no stabilising Riccati solution.
 ValueAnchors GoalAnchors(const ControlTask& task, double rho, double weight, double h = 1e-3);
+
+/// Value targets from the policy of `value` (HjbController): runs from `starts` starts
+/// of the task (task.Starts(starts, seed)); at every state x_k of a run of K steps of
+/// period T, the discounted cost-to-go of the rest of the run,
+///   G_k = sum_{k <= j < K} e^{-rho (j - k) T} T c(x_j, u_j) + e^{-rho (K - k) T} V(x_K),
+/// scale 1, in a seeded order, `batch` (256) of them per mini-batch.
+ValueAnchors RolloutAnchors(const ControlTask& task, const ValueFunction& value, double rho, double weight,
+                            int starts, std::uint64_t seed, int threads = 1);
 
 /// The structured value network of the task, initialised from seed (file comment).
 ValueFunction MakeTaskValueFunction(const ControlTask& task, const HjbOptions& options);

@@ -154,6 +154,9 @@ struct ValueAnchors {
   Eigen::MatrixXd states;
   Eigen::VectorXd values, scales;
   double weight = 0.0;
+  /// Anchors per mini-batch, taken in turn from the columns (0: all of them in every
+  /// mini-batch). The term then weighs the mean over the mini-batch's anchors.
+  int batch = 0;
 };
 
 /// The anchor term weight * mean_a ((V(x_a) - v_a) / scale_a)^2 of `anchors` and, if
