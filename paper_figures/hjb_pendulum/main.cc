@@ -208,7 +208,8 @@ int main(int argc, char** argv) {
   app.add_option("--seed", o.seed, "seed of the start states")->capture_default_str();
   app.add_option("--hjb-seed", o.hjb.seed, "seed of the value network and its states")->capture_default_str();
   app.add_option("--threads", o.threads, "threads (0: all cores)")->check(CLI::Range(0, 256));
-  app.add_flag("--quick", o.quick, "a 3-stage toy value function, 2 starts, 5 shooting iterations (seconds)");
+  app.add_flag("--quick", o.quick,
+               "a toy value function (3 stages, 1 rollout stage), 2 starts, 5 shooting iterations (seconds)");
   app.add_flag("--plot", plot, "draw hjb_pendulum.png with plot.py");
   app.add_flag("--quiet", o.quiet, "no per-stage lines");
   CLI11_PARSE(app, argc, argv);

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """The HJB value function's spread over the seeds of its network, as `diffdyn sweep` grids.
 
-Trains `diffdyn hjb --system pendulum --seed S` for S = 0 .. N-1 (the figure's settings,
-`diffdyn hjb`'s defaults), runs each policy with `diffdyn control --controller hjb
+Trains `diffdyn hjb --system pendulum --seed S` for S = F .. F+N-1 (the figure's settings,
+`diffdyn hjb`'s defaults, or with --rollout-stages K), runs each policy with `diffdyn control --controller hjb
 --starts 300 --seed 1` (the figure's starts) and compares its per-start costs with the
 multiple-shooting costs stored in results/starts.csv. Writes OUT/seeds.csv:
 
@@ -11,7 +11,8 @@ multiple-shooting costs stored in results/starts.csv. Writes OUT/seeds.csv:
     mean_ratio (mean J / mean J_shooting over all starts), median_ratio, p90_ratio (of
     J / J_shooting over the starts with J_shooting >= 1; nearest rank, as the figure)
 
-    seeds.py --diffdyn build/cli/diffdyn --out OUT [--seeds 10] [--quick]
+    seeds.py --diffdyn build/cli/diffdyn --out OUT [--seeds 10] [--first-seed 0]
+             [--rollout-stages K] [--quick]
 """
 import argparse
 import csv
@@ -51,7 +52,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--diffdyn", required=True, type=lambda p: Path(p).resolve())
     parser.add_argument("--out", required=True, type=lambda p: Path(p).resolve())
-    parser.add_argument("--seeds", type=int, default=10)
+    parser.add_argument("--seeds", type=int, default=10, help="how many seeds")
+    parser.add_argument("--first-seed", type=int, default=0, help="the first seed")
+    parser.add_argument("--rollout-stages", type=int, help="diffdyn hjb --rollout-stages (default: its own)")
     parser.add_argument("--quick", action="store_true", help="one short stage per seed (checks the pipeline)")
     args = parser.parse_args()
     shooting = {int(r["start"]): float(r["cost"]) for r in csv.DictReader(open(HERE / "results/starts.csv"))
@@ -59,10 +62,12 @@ def main():
 
     trained = sweep(args.diffdyn, args.out, "hjb", {
         "command": "hjb", "options": {"--system": "pendulum", "--threads": 2, "--quiet": True,
+                                      **({} if args.rollout_stages is None else
+                                         {"--rollout-stages": args.rollout_stages}),
                                       **({"--stages": 1, "--polish-stages": 0, "--epochs": 1, "--samples": 1000,
                                            "--rollout-starts": 2, "--rollout-epochs": 1}
                                          if args.quick else {})},
-        "grid": {"--seed": list(range(args.seeds))}})
+        "grid": {"--seed": list(range(args.first_seed, args.first_seed + args.seeds))}})
     models = [str(args.out / out_of(t)) for t in trained]
     run = sweep(args.diffdyn, args.out, "control", {
         "command": "control", "options": {"--system": "pendulum", "--controller": "hjb", "--starts": 300,
@@ -70,7 +75,7 @@ def main():
         "grid": {"--model": models}})
 
     rows = []
-    for seed, (t, c) in enumerate(zip(trained, run)):
+    for seed, (t, c) in enumerate(zip(trained, run), start=args.first_seed):
         hjb = json.loads((t / "stdout.txt").read_text())
         validation = hjb["candidates"][0]
         starts = list(csv.DictReader(open(args.out / out_of(c) / "starts.csv")))
