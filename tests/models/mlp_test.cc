@@ -223,6 +223,46 @@ TEST(Mlp, EvaluateIsIndependentOfBatchChunksAndThreads) {
   }
 }
 
+// InputJacobianReverse on a deeper net whose input is its widest layer: the
+// Jacobians of the closed form per sample, and the same bytes at any thread count;
+// with the layer kernel also at any chunk size (its sums do not depend on it).
+TEST(Mlp, InputJacobianReverseIsIndependentOfChunksAndThreads) {
+  Rng rng(29);
+  MlpArchitecture arch{{12, 9, 11, 7, 3},
+                       {Activation::Softplus(), Activation::Tanh(), Activation::Elu(0.8)}};
+  const Mlp<double> net(arch, RandomVector(arch.num_parameters(), 0.4, rng));
+  const int batch = 101;
+  const Eigen::MatrixXd X = RandomMatrix(12, batch, 1.0, rng);
+  MlpWorkspace ws(arch, batch, 40, false);
+  Eigen::MatrixXd Y, J;
+  net.InputJacobianReverse(X, &Y, &J, &ws, 1);
+  ASSERT_EQ(J.rows(), 3);
+  ASSERT_EQ(J.cols(), 12 * batch);
+  for (int b = 0; b < batch; ++b) {
+    Eigen::VectorXd y;
+    Eigen::MatrixXd jac;
+    net.ValueAndJacobian(Eigen::VectorXd(X.col(b)), &y, &jac);
+    EXPECT_LT((Y.col(b) - y).cwiseAbs().maxCoeff(), 1e-13);
+    EXPECT_LT((J.middleCols(12 * b, 12) - jac).cwiseAbs().maxCoeff(), 1e-13) << "sample " << b;
+  }
+  for (int threads : {2, 3}) {
+    Eigen::MatrixXd Y2, J2;
+    net.InputJacobianReverse(X, &Y2, &J2, &ws, threads);
+    EXPECT_TRUE(Y2 == Y && J2 == J) << threads << " threads";
+  }
+  if (kHaveLayerKernel) {
+    MlpWorkspace other(arch, batch, 64, false);
+    Eigen::MatrixXd Y2, J2;
+    net.InputJacobianReverse(X, &Y2, &J2, &other, 2);
+    EXPECT_TRUE(Y2 == Y && J2 == J) << "chunk 64";
+    // A workspace that evaluated first (Evaluate sizes the same block buffers).
+    Eigen::MatrixXd values(3, batch);
+    net.Evaluate(X, values, &other, 2);
+    net.InputJacobianReverse(X.rightCols(5), &Y2, &J2, &other);
+    EXPECT_TRUE(J2 == J.rightCols(12 * 5)) << "a batch of the last 5 samples";
+  }
+}
+
 // The layer kernel skips hidden units that are zero for a whole block of samples.
 // Units dead everywhere, units dead in one block only, and a layer dead in every
 // unit (the next layer then sees only its biases) must all give Forward's values.

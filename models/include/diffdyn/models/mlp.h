@@ -177,7 +177,8 @@ class BasicMlpWorkspace {
     Matrix abar[2], dbar, ubar[2], zbar;
     Vector weight_t;          // W_l^T of a thin layer, kThinSide x width (reverse sweep)
     Vector grad;
-    Vector block;             // 2 feature-major blocks, width x kLayerBlock (Evaluate)
+    Vector block;             // feature-major blocks of kLayerBlock samples (Evaluate,
+                              // and InputJacobianReverse with the layer kernel)
     std::vector<int> rows;             // 2 lists of a block's live rows, width each (Evaluate)
     int count = 0;                 // samples in this chunk after the last Forward
     bool has_jacobian = false;     // whether the last Forward built the chain
@@ -225,6 +226,9 @@ class BasicMlpWorkspace {
   bool jacobian_ = false;
   int batch_ = 0;  // batch size of the last Forward; -1 after Evaluate (no tape)
   std::vector<Chunk> chunks_;
+  // W_l^T of every layer (column-major n_l x n_{l+1}, one after the other) and
+  // max_width zeros: the reverse sweeps of InputJacobianReverse's layer-kernel path.
+  Eigen::Matrix<S, Eigen::Dynamic, 1> transposed_;
 };
 
 /// Workspace of Mlp<double>'s batched paths.
@@ -454,7 +458,7 @@ class Mlp {
       // The kernel's block buffers, only in workspaces that evaluate (not in tapes).
       const Eigen::Index block_size = Eigen::Index(2) * arch_.max_width() * kLayerBlock;
       for (int c = 0; c < NumChunks(batch, ws->chunk_size()); ++c) {
-        if (ws->chunks_[c].block.size() != block_size) ws->chunks_[c].block.resize(block_size);
+        if (ws->chunks_[c].block.size() < block_size) ws->chunks_[c].block.resize(block_size);
         ws->chunks_[c].rows.resize(std::size_t(2) * arch_.max_width());
       }
     }
@@ -509,9 +513,16 @@ class Mlp {
     BackwardImpl(gy, kNone, grad_params.data(), true, grad_inputs, ws, threads, scratch);
   }
 
-  /// Input Jacobians by batched reverse mode (n_L backward sweeps stacked into
-  /// one): J = [J_1 ... J_B] (n_L x n_0 B), same layout as Forward's, and
-  /// Y = f(X). Cheaper than the forward chain when n_L < n_0.
+  /// Input Jacobians by batched reverse mode (n_L backward sweeps per sample):
+  /// J = [J_1 ... J_B] (n_L x n_0 B), same layout as Forward's, and Y = f(X).
+  /// Cheaper than the forward chain when n_L < n_0. Where kHaveLayerKernel holds
+  /// and the net has a hidden layer, blocks of kLayerBlock samples run the forward
+  /// pass and the sweeps abar_{l-1} = (W_l^T abar_l) .* g'(a_{l-1}) through the
+  /// layer kernel on transposed weight copies, in cache and without packing; each
+  /// sample's J then does not depend on the batch, chunking or thread count.
+  /// Elsewhere the sweeps of a chunk are stacked into one BLAS product per layer.
+  /// Chunks of ws->chunk_size() samples over `threads` threads; the same bytes at
+  /// any thread count.
   void InputJacobianReverse(const MatrixB& X, MatrixB* Y, MatrixB* jac,
                             Workspace* ws, int threads = 1) const
     requires std::is_floating_point_v<T>
@@ -526,6 +537,12 @@ class Mlp {
     }
     const int cap = ws->chunk_size();
     const int L = arch_.num_layers();
+    if constexpr (kUseLayerKernel) {
+      if (L >= 2) {
+        InputJacobianByBlocks(X, Y, jac, ws, threads);
+        return;
+      }
+    }
     // Each chunk's forward pass and its sweeps run back to back on one thread,
     // so the tape is still in cache when the sweeps read it.
     ParallelForChunks(batch, cap, threads, [&](int c, int begin, int end) {
@@ -722,6 +739,117 @@ class Mlp {
       }
       for (int s = 0; s < ns; ++s) {
         for (int i = 0; i < num_outputs(); ++i) y(i, s0 + s) = in[i * kB + s];
+      }
+    }
+#endif
+  }
+
+  // InputJacobianReverse with the layer kernel (L >= 2, kUseLayerKernel): per block of
+  // kLayerBlock samples, feature-major, the forward pass keeps each hidden layer's
+  // g'(a_l) (sum of hidden widths x kLayerBlock), then each output k's sweep runs
+  //   abar_{L-2} = W_{L-1}^T e_k .* g'(a_{L-2}),
+  //   abar_{l-1} = (W_l^T abar_l) .* g'(a_{l-1}),  l = L-2 .. 1,   dy_k/dx = W_0^T abar_0,
+  // through LayerBlock on transposed copies of the weights (zero bias): nothing is
+  // packed and every sample's sums run in the same order whatever the chunking.
+  void InputJacobianByBlocks(const MatrixB& X, MatrixB* Y, MatrixB* jac, Workspace* ws,
+                             int threads) const {
+    constexpr int kB = kLayerBlock;
+    const int L = arch_.num_layers();
+    const int width = arch_.max_width();
+    // W_l^T, l = 0 .. L-2, then zeros (the sweeps' bias), shared by the chunks.
+    Eigen::Index transposed_size = width;
+    for (int l = 0; l + 1 < L; ++l) transposed_size += Eigen::Index(arch_.sizes[l]) * arch_.sizes[l + 1];
+    if (ws->transposed_.size() < transposed_size) ws->transposed_.resize(transposed_size);
+    B* wt = ws->transposed_.data();
+    for (int l = 0; l + 1 < L; ++l) {
+      Eigen::Map<MatrixB>(wt, arch_.sizes[l], arch_.sizes[l + 1]) = W(l).transpose();
+      wt += Eigen::Index(arch_.sizes[l]) * arch_.sizes[l + 1];
+    }
+    std::fill(wt, wt + width, B(0));
+    // Per chunk: two blocks to run the layers between, then the hidden g' blocks.
+    Eigen::Index hidden = 0;
+    for (int l = 0; l + 1 < L; ++l) hidden += arch_.sizes[l + 1];
+    const Eigen::Index block_size = (Eigen::Index(2) * width + hidden) * kB;
+    const int batch = static_cast<int>(X.cols());
+    for (int c = 0; c < NumChunks(batch, ws->chunk_size()); ++c) {
+      typename Workspace::Chunk& ch = ws->chunks_[c];
+      if (ch.block.size() < block_size) ch.block.resize(block_size);
+      if (static_cast<int>(ch.rows.size()) < 2 * width) ch.rows.resize(std::size_t(2) * width);
+    }
+    const B* transposed = ws->transposed_.data();
+    ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
+      typename Workspace::Chunk& ch = ws->chunks_[c];
+      for (int s0 = begin; s0 < end; s0 += kB) {
+        JacobianBlock(X, s0, std::min(kB, end - s0), transposed, Y, jac, &ch);
+      }
+    });
+  }
+
+  // One block of InputJacobianByBlocks: samples [s0, s0 + ns), ns <= kLayerBlock.
+  void JacobianBlock([[maybe_unused]] const MatrixB& X, [[maybe_unused]] int s0,
+                     [[maybe_unused]] int ns, [[maybe_unused]] const B* transposed,
+                     [[maybe_unused]] MatrixB* Y, [[maybe_unused]] MatrixB* jac,
+                     [[maybe_unused]] typename Workspace::Chunk* ch) const {
+#if DIFFDYN_LAYER_KERNEL
+    constexpr int kB = kLayerBlock;
+    const int L = arch_.num_layers();
+    const int width = arch_.max_width();
+    const int n0 = num_inputs();
+    B* in = ch->block.data();
+    B* out = in + Eigen::Index(width) * kB;
+    B* const dg = out + Eigen::Index(width) * kB;
+    int* const all_rows = ch->rows.data();  // 0 .. width-1: every input row is summed
+    int* const sink = all_rows + width;      // LayerBlock's live rows, unused here
+    for (int i = 0; i < width; ++i) all_rows[i] = i;
+    // Forward: h_{l+1} = g(W_l h_l + b_l), g' kept; the inputs zero-padded.
+    for (int i = 0; i < n0; ++i) {
+      B* row = in + i * kB;
+      for (int s = 0; s < ns; ++s) row[s] = X(i, s0 + s);
+      std::fill(row + ns, row + kB, B(0));
+    }
+    B* dg_l = dg;
+    for (int l = 0; l < L; ++l) {
+      const int rows = arch_.sizes[l + 1];
+      internal::LayerBlock(W(l).data(), rows, b(l).data(), in, all_rows, arch_.sizes[l], false,
+                           out, sink);
+      if (l + 1 < L) {
+        ApplyActivation(arch_.activations[l], out, Eigen::Index(rows) * kB, out, dg_l, nullptr);
+        dg_l += Eigen::Index(rows) * kB;
+      }
+      std::swap(in, out);
+    }
+    const int m = num_outputs();
+    for (int s = 0; s < ns; ++s) {
+      for (int k = 0; k < m; ++k) (*Y)(k, s0 + s) = in[k * kB + s];
+    }
+    // The sweeps, one output at a time: g'(a_l) of layer l sits at dg + offset[l].
+    // W_l^T ends where the zero bias begins; the sweep walks the copies backwards.
+    Eigen::Index wt_size = 0;
+    for (int l = 0; l + 1 < L; ++l) wt_size += Eigen::Index(arch_.sizes[l]) * arch_.sizes[l + 1];
+    const B* const bias0 = transposed + wt_size;
+    for (int k = 0; k < m; ++k) {
+      // abar_{L-2} = W_{L-1}(k, :)^T .* g'(a_{L-2}).
+      const int last = arch_.sizes[L - 1];
+      const B* dg_last = dg_l - Eigen::Index(last) * kB;
+      for (int i = 0; i < last; ++i) {
+        const B w = W(L - 1)(k, i);
+        for (int s = 0; s < kB; ++s) in[i * kB + s] = w * dg_last[i * kB + s];
+      }
+      const B* dg_prev = dg_last;
+      const B* wt_l = bias0;
+      for (int l = L - 2; l >= 0; --l) {
+        const int rows = arch_.sizes[l];
+        wt_l -= Eigen::Index(rows) * arch_.sizes[l + 1];
+        internal::LayerBlock(wt_l, rows, bias0, in, all_rows, arch_.sizes[l + 1], false, out, sink);
+        if (l >= 1) {
+          dg_prev -= Eigen::Index(rows) * kB;
+          for (Eigen::Index e = 0; e < Eigen::Index(rows) * kB; ++e) out[e] *= dg_prev[e];
+        }
+        std::swap(in, out);
+      }
+      // dy_k/dx_j of sample s is in[j * kB + s]; J's column of sample s, input j is s n0 + j.
+      for (int s = 0; s < ns; ++s) {
+        for (int j = 0; j < n0; ++j) (*jac)(k, Eigen::Index(s0 + s) * n0 + j) = in[j * kB + s];
       }
     }
 #endif
