@@ -53,6 +53,7 @@
 #pragma once
 
 #include <algorithm>
+#include <numeric>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -713,11 +714,7 @@ class Mlp {
     int* const rows_second = rows_first + arch_.max_width();
     for (int s0 = 0; s0 < nb; s0 += kB) {
       const int ns = std::min(kB, nb - s0);
-      for (int i = 0; i < num_inputs(); ++i) {
-        B* row = first + i * kB;
-        for (int s = 0; s < ns; ++s) row[s] = x(i, s0 + s);
-        std::fill(row + ns, row + kB, B(0));
-      }
+      ToFeatureMajor(x, s0, ns, first);
       B* in = first;
       B* out = second;
       int* in_rows = rows_first;
@@ -737,11 +734,28 @@ class Mlp {
         std::swap(in, out);
         std::swap(in_rows, out_rows);
       }
-      for (int s = 0; s < ns; ++s) {
-        for (int i = 0; i < num_outputs(); ++i) y(i, s0 + s) = in[i * kB + s];
-      }
+      FromFeatureMajor(in, s0, ns, y);
     }
 #endif
+  }
+
+  // Columns [s0, s0 + ns) of x (ns <= kLayerBlock) into the feature-major block
+  // (row stride kLayerBlock), zero-padded to kLayerBlock samples.
+  template <typename XBlock>
+  static void ToFeatureMajor(const XBlock& x, int s0, int ns, B* block) {
+    for (Eigen::Index i = 0; i < x.rows(); ++i) {
+      B* row = block + i * kLayerBlock;
+      for (int s = 0; s < ns; ++s) row[s] = x(i, s0 + s);
+      std::fill(row + ns, row + kLayerBlock, B(0));
+    }
+  }
+
+  // The first ns samples of a feature-major block into columns [s0, s0 + ns) of y.
+  template <typename YBlock>
+  static void FromFeatureMajor(const B* block, int s0, int ns, YBlock&& y) {
+    for (int s = 0; s < ns; ++s) {
+      for (Eigen::Index i = 0; i < y.rows(); ++i) y(i, s0 + s) = block[i * kLayerBlock + s];
+    }
   }
 
   // InputJacobianReverse with the layer kernel (L >= 2, kUseLayerKernel): per block of
@@ -771,23 +785,26 @@ class Mlp {
     for (int l = 0; l + 1 < L; ++l) hidden += arch_.sizes[l + 1];
     const Eigen::Index block_size = (Eigen::Index(2) * width + hidden) * kB;
     const int batch = static_cast<int>(X.cols());
+    // rows[0 .. width) = 0 .. width-1: every input row of a layer is summed.
     for (int c = 0; c < NumChunks(batch, ws->chunk_size()); ++c) {
       typename Workspace::Chunk& ch = ws->chunks_[c];
       if (ch.block.size() < block_size) ch.block.resize(block_size);
       if (static_cast<int>(ch.rows.size()) < 2 * width) ch.rows.resize(std::size_t(2) * width);
+      std::iota(ch.rows.begin(), ch.rows.begin() + width, 0);
     }
-    const B* transposed = ws->transposed_.data();
+    const B* zero_bias = wt;
     ParallelForChunks(batch, ws->chunk_size(), threads, [&](int c, int begin, int end) {
       typename Workspace::Chunk& ch = ws->chunks_[c];
       for (int s0 = begin; s0 < end; s0 += kB) {
-        JacobianBlock(X, s0, std::min(kB, end - s0), transposed, Y, jac, &ch);
+        JacobianBlock(X, s0, std::min(kB, end - s0), zero_bias, Y, jac, &ch);
       }
     });
   }
 
   // One block of InputJacobianByBlocks: samples [s0, s0 + ns), ns <= kLayerBlock.
+  // zero_bias: the workspace's max_width zeros, right after the last W_l^T copy.
   void JacobianBlock([[maybe_unused]] const MatrixB& X, [[maybe_unused]] int s0,
-                     [[maybe_unused]] int ns, [[maybe_unused]] const B* transposed,
+                     [[maybe_unused]] int ns, [[maybe_unused]] const B* zero_bias,
                      [[maybe_unused]] MatrixB* Y, [[maybe_unused]] MatrixB* jac,
                      [[maybe_unused]] typename Workspace::Chunk* ch) const {
 #if DIFFDYN_LAYER_KERNEL
@@ -798,15 +815,10 @@ class Mlp {
     B* in = ch->block.data();
     B* out = in + Eigen::Index(width) * kB;
     B* const dg = out + Eigen::Index(width) * kB;
-    int* const all_rows = ch->rows.data();  // 0 .. width-1: every input row is summed
-    int* const sink = all_rows + width;      // LayerBlock's live rows, unused here
-    for (int i = 0; i < width; ++i) all_rows[i] = i;
-    // Forward: h_{l+1} = g(W_l h_l + b_l), g' kept; the inputs zero-padded.
-    for (int i = 0; i < n0; ++i) {
-      B* row = in + i * kB;
-      for (int s = 0; s < ns; ++s) row[s] = X(i, s0 + s);
-      std::fill(row + ns, row + kB, B(0));
-    }
+    const int* const all_rows = ch->rows.data();  // 0 .. width-1 (InputJacobianByBlocks)
+    int* const sink = ch->rows.data() + width;     // LayerBlock's live rows, unused here
+    // Forward: h_{l+1} = g(W_l h_l + b_l), g' kept.
+    ToFeatureMajor(X, s0, ns, in);
     B* dg_l = dg;
     for (int l = 0; l < L; ++l) {
       const int rows = arch_.sizes[l + 1];
@@ -818,15 +830,10 @@ class Mlp {
       }
       std::swap(in, out);
     }
+    FromFeatureMajor(in, s0, ns, *Y);
+    // The sweeps, one output at a time, walking the g' blocks (dg_l is past the last)
+    // and the W_l^T copies (which end at zero_bias) backwards.
     const int m = num_outputs();
-    for (int s = 0; s < ns; ++s) {
-      for (int k = 0; k < m; ++k) (*Y)(k, s0 + s) = in[k * kB + s];
-    }
-    // The sweeps, one output at a time: g'(a_l) of layer l sits at dg + offset[l].
-    // W_l^T ends where the zero bias begins; the sweep walks the copies backwards.
-    Eigen::Index wt_size = 0;
-    for (int l = 0; l + 1 < L; ++l) wt_size += Eigen::Index(arch_.sizes[l]) * arch_.sizes[l + 1];
-    const B* const bias0 = transposed + wt_size;
     for (int k = 0; k < m; ++k) {
       // abar_{L-2} = W_{L-1}(k, :)^T .* g'(a_{L-2}).
       const int last = arch_.sizes[L - 1];
@@ -836,11 +843,12 @@ class Mlp {
         for (int s = 0; s < kB; ++s) in[i * kB + s] = w * dg_last[i * kB + s];
       }
       const B* dg_prev = dg_last;
-      const B* wt_l = bias0;
+      const B* wt_l = zero_bias;
       for (int l = L - 2; l >= 0; --l) {
         const int rows = arch_.sizes[l];
         wt_l -= Eigen::Index(rows) * arch_.sizes[l + 1];
-        internal::LayerBlock(wt_l, rows, bias0, in, all_rows, arch_.sizes[l + 1], false, out, sink);
+        internal::LayerBlock(wt_l, rows, zero_bias, in, all_rows, arch_.sizes[l + 1], false, out,
+                             sink);
         if (l >= 1) {
           dg_prev -= Eigen::Index(rows) * kB;
           for (Eigen::Index e = 0; e < Eigen::Index(rows) * kB; ++e) out[e] *= dg_prev[e];
