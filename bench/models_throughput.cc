@@ -4,7 +4,8 @@
 // peak of the same precision measured in the same run: the best two-thread matrix
 // product at 2048^3 (Eigen split over two threads, and OpenBLAS's cblas_dgemm or
 // cblas_sgemm on two threads when libopenblas is present, loaded at run time).
-// bench/models_throughput_torch.py times the same work in PyTorch.
+// bench/models_throughput_torch.py times the same work in PyTorch. BM_ApplyActivation
+// times the activations alone (g and g' per value).
 //
 //   build/bench/bench_models_throughput      (prints "fraction of peak" at the end)
 //
@@ -13,6 +14,7 @@
 // 3 * sum_l 2 n_{l+1} n_l B = 33.6 MFLOP per iteration.
 
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <map>
 #include <string>
@@ -74,6 +76,28 @@ BENCHMARK(BM_ForwardBackward<float>)
     ->ArgNames({"threads", "relu"})
     ->UseRealTime()
     ->Unit(benchmark::kMicrosecond);
+
+// ApplyActivation alone: g and g' of 3200 pre-activations (a 32-sample block of two
+// 100-unit layers), N(0, 3^2) values, one thread, as nanoseconds per value. Argument:
+// 0 softplus, 1 sigmoid, 2 tanh (the counter s/value prints e.g. "3.5n": 3.5 ns).
+template <typename S>
+void BM_ApplyActivation(benchmark::State& state) {
+  constexpr Eigen::Index kValues = 3200;
+  const Activation act = std::array{Activation::Softplus(), Activation::Sigmoid(),
+                                    Activation::Tanh()}[static_cast<std::size_t>(state.range(0))];
+  const Eigen::Matrix<S, Eigen::Dynamic, 1> a = S(3) * RandomMatrix<S>(kValues, 1, 4);
+  Eigen::Matrix<S, Eigen::Dynamic, 1> g(kValues), dg(kValues);
+  for (auto _ : state) {
+    ApplyActivation<S>(act, a.data(), kValues, g.data(), dg.data(), nullptr);
+    benchmark::DoNotOptimize(g.data());
+    benchmark::DoNotOptimize(dg.data());
+  }
+  state.counters["s/value"] = benchmark::Counter(
+      double(kValues), benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+  state.SetLabel(ActivationName(act.kind));
+}
+BENCHMARK(BM_ApplyActivation<double>)->DenseRange(0, 2)->ArgName("act")->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_ApplyActivation<float>)->DenseRange(0, 2)->ArgName("act")->Unit(benchmark::kMicrosecond);
 
 // The peak candidates (peak_dgemm.h): Eigen and OpenBLAS, C = A B at 2048^3 on two
 // threads, per precision.

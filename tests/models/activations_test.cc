@@ -199,6 +199,37 @@ TEST(Activations, ExpAndLog1pOfTheBatchedPathWithinTwoUlp) {
   ExpectExpAndLog1pWithinTwoUlp<float>();
 }
 
+TEST(Activations, VectorizedTanhInFloatWithinFewUlpOfStdTanh) {
+  // Log-spaced magnitudes from subnormal to the largest float, both signs, a dense
+  // sweep over the bend and around the switch of forms at |x| = 1/2.
+  std::vector<float> x;
+  for (double m = 1e-44; m < 3e38; m *= 1.37) {
+    x.push_back(static_cast<float>(m));
+    x.push_back(static_cast<float>(-m));
+  }
+  for (int i = -40000; i <= 40000; ++i) x.push_back(static_cast<float>(i * 5e-4));
+  float below = 0.5f, above = 0.5f;
+  for (int i = 0; i < 1000; ++i) {
+    below = std::nextafter(below, 0.0f);
+    above = std::nextafter(above, 1.0f);
+    x.insert(x.end(), {below, above, -below, -above});
+  }
+  x.insert(x.end(), {0.0f, -0.0f, 0.5f, -0.5f});
+  std::vector<float> t(x.size());
+  VectorizedTanh(x.data(), static_cast<Eigen::Index>(x.size()), t.data());
+  for (size_t i = 0; i < x.size(); ++i) {
+    const float ref = std::tanh(x[i]);
+    ASSERT_EQ(std::signbit(t[i]), std::signbit(ref)) << "x = " << x[i];
+    ASSERT_LE(UlpDistance(t[i], ref), 4.0) << "x = " << x[i] << ": " << t[i] << " vs std::tanh " << ref;
+  }
+  std::vector<float> s = {INFINITY, -INFINITY, NAN, -NAN};
+  VectorizedTanh(s.data(), 4, s.data());
+  EXPECT_EQ(s[0], 1.0f);
+  EXPECT_EQ(s[1], -1.0f);
+  EXPECT_TRUE(std::isnan(s[2]));
+  EXPECT_TRUE(std::isnan(s[3]));
+}
+
 TEST(Activations, VectorizedTanhWithinFewUlpOfStdTanh) {
   // Log-spaced magnitudes from subnormal to huge, both signs, plus a dense sweep
   // around the branch switch at |x| = 1/2 and over the range where tanh bends.
