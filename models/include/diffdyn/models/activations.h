@@ -26,7 +26,7 @@
 //   * ActivationValue / ActivationDerivative / ActivationSecondDerivative are
 //     templated on the scalar (double or ceres::Jet) for single samples;
 //   * ApplyActivation evaluates g, g' and optionally g'' over a whole array of
-//     pre-activations in one vectorised pass (the batched float and double paths).
+//     pre-activations in vectorised passes (the batched float and double paths).
 //
 //   Activation act = Activation::Softplus(2.0);
 //   double y = ActivationValue(act, 0.3), dy = ActivationDerivative(act, 0.3);
