@@ -205,84 +205,6 @@ S ActivationSecondDerivative(const Activation& act, const S& a) {
 
 namespace internal {
 
-// a b + c with one rounding (std::fma) where the target has FMA instructions, with two
-// (a product, then a sum) elsewhere: the same operations GCC's contraction of Eigen's
-// packet products and sums gives on either kind of target, fixed in the source.
-template <typename S>
-inline S MulAdd(S a, S b, S c) {
-#ifdef __FMA__
-  return std::fma(a, b, c);
-#else
-  return a * b + c;
-#endif
-}
-
-}  // namespace internal
-
-/// t[i] = tanh(x[i]) for n contiguous values of S (double or float), vectorised,
-/// within a few ulp of std::tanh everywhere (t may alias x). Two branch-free forms,
-/// chosen per element by |x|:
-///
-///   |x| <  1/2:  the 8th convergent of Lambert's continued fraction
-///                tanh x = x / (1 + x^2 / (3 + x^2 / (5 + ...))) = x A_8 / B_8, from
-///                the recurrences A_k = (2k-1) A_{k-1} + x^2 A_{k-2} (same for B;
-///                A_0 = 0, A_1 = 1, B_0 = B_1 = 1). It is evaluated as
-///                t = x + x D_8 / B_8 with D_k = A_k - B_k obeying the same recurrence
-///                (D_0 = -1, D_1 = 0): every D_k is <= 0 and every B_k > 0, so there is
-///                no cancellation, and the rounding of the small correction
-///                x D / B (|D / B| < 1/12) barely reaches t. Truncation error < 1e-18
-///                relative; tiny and subnormal x give x, -0 gives -0;
-///   |x| >= 1/2:  sign(x) (1 - e) / (1 + e), e = exp(-2|x|) in (0, 0.37]: no
-///                cancellation, no overflow (large |x| gives e = 0, t = +-1).
-///
-/// NaN propagates. Per block of 64 values, e comes from Eigen's vectorised exp; the
-/// rest is one loop the compiler vectorises, with each value's recurrences in
-/// registers and the choice of form made on the bits of x (integer compares
-/// vectorise where a floating-point one does not under GCC's default
-/// -ftrapping-math); x^2 D_{k-2} + (2k-1) D_{k-1} and x + x (D / B) are fused
-/// multiply-adds where the target has FMA (internal::MulAdd).
-template <typename S>
-inline void VectorizedTanh(const S* x, Eigen::Index n, S* t) {
-  static_assert(std::is_floating_point_v<S>, "VectorizedTanh needs float or double");
-  using ArrayS = Eigen::Array<S, Eigen::Dynamic, 1>;
-  using U = std::conditional_t<sizeof(S) == 4, std::uint32_t, std::uint64_t>;
-  using I = std::make_signed_t<U>;
-  constexpr Eigen::Index kBlock = 64;
-  constexpr int kLevels = 8;
-  constexpr U kSign = U(1) << (8 * sizeof(S) - 1);
-  constexpr U kHalf = std::bit_cast<U>(S(0.5));
-  S e[kBlock];
-  for (Eigen::Index start = 0; start < n; start += kBlock) {
-    const Eigen::Index m = std::min(kBlock, n - start);
-    Eigen::Map<ArrayS>(e, m) = (S(-2) * Eigen::Map<const ArrayS>(x + start, m).abs()).exp();
-    for (Eigen::Index i = 0; i < m; ++i) {
-      const S xi = x[start + i];
-      const S x2 = xi * xi;
-      // D_k and B_k, k = 2..8, from (D_0, D_1) = (-1, 0) and (B_0, B_1) = (1, 1).
-      S d_prev = S(-1), d_cur = S(0), b_prev = S(1), b_cur = S(1);
-      for (int k = 2; k <= kLevels; ++k) {
-        const S odd = S(2 * k - 1);
-        const S d_next = internal::MulAdd(x2, d_prev, odd * d_cur);
-        const S b_next = internal::MulAdd(x2, b_prev, odd * b_cur);
-        d_prev = d_cur;
-        d_cur = d_next;
-        b_prev = b_cur;
-        b_cur = b_next;
-      }
-      const S small = internal::MulAdd(xi, d_cur / b_cur, xi);
-      const S large = (S(1) - e[i]) / (S(1) + e[i]);
-      // |x| < 1/2 on the bits of x (NaN's magnitude lies above); sign(x) large by
-      // copying x's sign bit onto large (> 0).
-      const U bits = std::bit_cast<U>(xi);
-      const U use_small = U(0) - U(I(bits & ~kSign) < I(kHalf));
-      const U large_bits = std::bit_cast<U>(large) ^ (bits & kSign);
-      t[start + i] = std::bit_cast<S>((std::bit_cast<U>(small) & use_small) | (large_bits & ~use_small));
-    }
-  }
-}
-
-namespace internal {
-
 // The unsigned integer of S's size, for choices made on a value's bits: GCC does not
 // vectorise a floating-point comparison under -ftrapping-math (its default), nor does
 // Eigen 3.4 vectorise select, while integer comparisons and masks vectorise.
@@ -470,7 +392,81 @@ inline void SoftplusBlock(const S* __restrict a, S p, S inv_p, Eigen::Index m, S
   }
 }
 
+// a b + c with one rounding (std::fma) where the target has FMA instructions, with two
+// (a product, then a sum) elsewhere: the same operations GCC's contraction of Eigen's
+// packet products and sums gives on either kind of target, fixed in the source.
+template <typename S>
+inline S MulAdd(S a, S b, S c) {
+#ifdef __FMA__
+  return std::fma(a, b, c);
+#else
+  return a * b + c;
+#endif
+}
+
 }  // namespace internal
+
+/// t[i] = tanh(x[i]) for n contiguous values of S (double or float), vectorised,
+/// within a few ulp of std::tanh everywhere (t may alias x). Two branch-free forms,
+/// chosen per element by |x|:
+///
+///   |x| <  1/2:  the 8th convergent of Lambert's continued fraction
+///                tanh x = x / (1 + x^2 / (3 + x^2 / (5 + ...))) = x A_8 / B_8, from
+///                the recurrences A_k = (2k-1) A_{k-1} + x^2 A_{k-2} (same for B;
+///                A_0 = 0, A_1 = 1, B_0 = B_1 = 1). It is evaluated as
+///                t = x + x D_8 / B_8 with D_k = A_k - B_k obeying the same recurrence
+///                (D_0 = -1, D_1 = 0): every D_k is <= 0 and every B_k > 0, so there is
+///                no cancellation, and the rounding of the small correction
+///                x D / B (|D / B| < 1/12) barely reaches t. Truncation error < 1e-18
+///                relative; tiny and subnormal x give x, -0 gives -0;
+///   |x| >= 1/2:  sign(x) (1 - e) / (1 + e), e = exp(-2|x|) in (0, 0.37]: no
+///                cancellation, no overflow (large |x| gives e = 0, t = +-1).
+///
+/// NaN propagates. Per block of 64 values, e comes from Eigen's vectorised exp; the
+/// rest is one loop the compiler vectorises, with each value's recurrences in
+/// registers and the choice of form made on the bits of x (integer compares
+/// vectorise where a floating-point one does not under GCC's default
+/// -ftrapping-math); x^2 D_{k-2} + (2k-1) D_{k-1} and x + x (D / B) are fused
+/// multiply-adds where the target has FMA (internal::MulAdd).
+template <typename S>
+inline void VectorizedTanh(const S* x, Eigen::Index n, S* t) {
+  static_assert(std::is_floating_point_v<S>, "VectorizedTanh needs float or double");
+  using ArrayS = Eigen::Array<S, Eigen::Dynamic, 1>;
+  using U = internal::BitsOf<S>;
+  using I = std::make_signed_t<U>;
+  constexpr Eigen::Index kBlock = 64;
+  constexpr int kLevels = 8;
+  constexpr U kSign = U(1) << (8 * sizeof(S) - 1);
+  constexpr U kHalf = std::bit_cast<U>(S(0.5));
+  S e[kBlock];
+  for (Eigen::Index start = 0; start < n; start += kBlock) {
+    const Eigen::Index m = std::min(kBlock, n - start);
+    Eigen::Map<ArrayS>(e, m) = (S(-2) * Eigen::Map<const ArrayS>(x + start, m).abs()).exp();
+    for (Eigen::Index i = 0; i < m; ++i) {
+      const S xi = x[start + i];
+      const S x2 = xi * xi;
+      // D_k and B_k, k = 2..8, from (D_0, D_1) = (-1, 0) and (B_0, B_1) = (1, 1).
+      S d_prev = S(-1), d_cur = S(0), b_prev = S(1), b_cur = S(1);
+      for (int k = 2; k <= kLevels; ++k) {
+        const S odd = S(2 * k - 1);
+        const S d_next = internal::MulAdd(x2, d_prev, odd * d_cur);
+        const S b_next = internal::MulAdd(x2, b_prev, odd * b_cur);
+        d_prev = d_cur;
+        d_cur = d_next;
+        b_prev = b_cur;
+        b_cur = b_next;
+      }
+      const S small = internal::MulAdd(xi, d_cur / b_cur, xi);
+      const S large = (S(1) - e[i]) / (S(1) + e[i]);
+      // |x| < 1/2 on the bits of x (NaN's magnitude lies above); sign(x) large by
+      // copying x's sign bit onto large (> 0).
+      const U bits = std::bit_cast<U>(xi);
+      const U use_small = U(0) - U(I(bits & ~kSign) < I(kHalf));
+      const U large_bits = std::bit_cast<U>(large) ^ (bits & kSign);
+      t[start + i] = internal::SelectBits(use_small, small, std::bit_cast<S>(large_bits));
+    }
+  }
+}
 
 /// Batched evaluation over n contiguous pre-activations a[0..n) of S (double or
 /// float): g[i] = g(a[i]), dg[i] = g'(a[i]) and, when ddg is not null,
