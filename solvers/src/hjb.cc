@@ -8,6 +8,7 @@
 
 #include "diffdyn/autodiff_ode/check.h"
 #include "diffdyn/models/init.h"
+#include "diffdyn/models/parallel.h"
 #include "diffdyn/models/random.h"
 #include "diffdyn/solvers/lqr.h"
 
@@ -51,20 +52,24 @@ Eigen::VectorXd TaskHjb::Policy(const Eigen::VectorXd& x, const Eigen::VectorXd&
 }
 
 void TaskHjb::Evaluate(const Eigen::MatrixXd& x, const Eigen::VectorXd& v, const Eigen::MatrixXd& p,
-                       Eigen::VectorXd* f, Eigen::VectorXd* f_v, Eigen::MatrixXd* f_p) const {
-  const Eigen::Index batch = x.cols();
+                       Eigen::VectorXd* f, Eigen::VectorXd* f_v, Eigen::MatrixXd* f_p, int threads) const {
+  const int batch = static_cast<int>(x.cols());
   f->resize(batch);
   f_p->resize(x.rows(), batch);
   *f_v = Eigen::VectorXd::Constant(batch, rho_);
-  Eigen::VectorXd a;
-  Eigen::MatrixXd b;
-  for (Eigen::Index i = 0; i < batch; ++i) {
-    Affine(x.col(i), &a, &b);
-    const Eigen::VectorXd w = -b.transpose() * p.col(i);
-    const Eigen::VectorXd u = task_.action_cost.ConjugateGradient(w);
-    (*f)[i] = rho_ * v[i] - task_.StateCost(x.col(i)) - p.col(i).dot(a) + task_.action_cost.Conjugate(w);
-    f_p->col(i) = -(a + b * u);
-  }
+  // Each state is independent: chunks of a size fixed here, so any thread count gives the same bits.
+  constexpr int kStatesPerChunk = 64;
+  ParallelForChunks(batch, kStatesPerChunk, threads, [&](int, int begin, int end) {
+    Eigen::VectorXd a;
+    Eigen::MatrixXd b;
+    for (int i = begin; i < end; ++i) {
+      Affine(x.col(i), &a, &b);
+      const Eigen::VectorXd w = -b.transpose() * p.col(i);
+      const Eigen::VectorXd u = task_.action_cost.ConjugateGradient(w);
+      (*f)[i] = rho_ * v[i] - task_.StateCost(x.col(i)) - p.col(i).dot(a) + task_.action_cost.Conjugate(w);
+      f_p->col(i) = -(a + b * u);
+    }
+  });
 }
 
 TrainOptions HjbOptions::DefaultTrain() {

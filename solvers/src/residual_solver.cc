@@ -7,6 +7,7 @@
 #include <Eigen/Cholesky>
 
 #include "diffdyn/autodiff_ode/check.h"
+#include "diffdyn/models/parallel.h"
 #include "diffdyn/solvers/lqr.h"
 
 namespace diffdyn {
@@ -25,7 +26,8 @@ LinearQuadraticHjb::LinearQuadraticHjb(Eigen::MatrixXd a, const Eigen::MatrixXd&
 }
 
 void LinearQuadraticHjb::Evaluate(const Eigen::MatrixXd& x, const Eigen::VectorXd& v, const Eigen::MatrixXd& p,
-                                  Eigen::VectorXd* f, Eigen::VectorXd* f_v, Eigen::MatrixXd* f_p) const {
+                                  Eigen::VectorXd* f, Eigen::VectorXd* f_v, Eigen::MatrixXd* f_p,
+                                  int /*threads*/) const {
   // F = rho V - x^T Q x - p^T A x + p^T S p / 4;  F_V = rho;  F_p = -A x + S p / 2.
   const Eigen::MatrixXd ax = a_ * x, sp = s_ * p;
   *f = rho_ * v - (x.cwiseProduct(q_ * x)).colwise().sum().transpose() -
@@ -124,7 +126,9 @@ ValueFunction ValueFunction::Quadratic(Mlp<double> net, const Eigen::VectorXd& g
 }
 
 ValueWorkspace ValueFunction::MakeWorkspace(int max_batch, int chunk_size) const {
-  return ValueWorkspace{MlpWorkspace(net_.architecture(), max_batch, chunk_size, true), {}, {}, {}};
+  ValueWorkspace ws;
+  ws.mlp = MlpWorkspace(net_.architecture(), max_batch, chunk_size, true);
+  return ws;
 }
 
 void ValueFunction::QuadraticHead(const ValueWorkspace& ws, Eigen::Index b, double* v,
@@ -160,17 +164,20 @@ void ValueFunction::Evaluate(const Eigen::MatrixXd& x, Eigen::VectorXd* v, Eigen
                              int threads) const {
   DIFFDYN_CHECK(x.rows() == n_, "ValueFunction: states must have ", n_, " rows, got ", x.rows());
   const Eigen::Index b = x.cols(), d = net_.num_inputs();
-  ws->z = features_.Encode(x);
+  features_.Encode(x, &ws->z);
   net_.Forward(ws->z, &ws->y, &ws->jac, &ws->mlp, threads);
   v->resize(b);
-  Eigen::MatrixXd dvdz(d, b);
+  ws->dvdz.resize(d, b);
   if (form_ == ValueForm::kDirect) {
     *v = ws->y.row(0).transpose();
-    dvdz = Eigen::Map<const Eigen::MatrixXd>(ws->jac.data(), d, b);
+    ws->dvdz = Eigen::Map<const Eigen::MatrixXd>(ws->jac.data(), d, b);
   } else {
-    for (Eigen::Index i = 0; i < b; ++i) QuadraticHead(*ws, i, &(*v)[i], dvdz.col(i));
+    // Each state's head is independent: chunks of the network's size over the threads.
+    ParallelForChunks(static_cast<int>(b), ws->mlp.chunk_size(), threads, [&](int, int begin, int end) {
+      for (int i = begin; i < end; ++i) QuadraticHead(*ws, i, &(*v)[i], ws->dvdz.col(i));
+    });
   }
-  *p = features_.PullBack(x, dvdz);
+  features_.PullBack(x, ws->dvdz, p);
 }
 
 void ValueFunction::Evaluate(const Eigen::MatrixXd& x, Eigen::VectorXd* v, Eigen::MatrixXd* p) const {
@@ -183,49 +190,51 @@ void ValueFunction::Backward(const Eigen::MatrixXd& x, const Eigen::VectorXd& gv
   const Eigen::Index b = x.cols(), d = net_.num_inputs(), m = net_.num_outputs();
   DIFFDYN_CHECK(ws->z.cols() == b && gv.size() == b && gp.rows() == n_ && gp.cols() == b,
                 "ValueFunction::Backward: cotangents must match the last Evaluate's ", ws->z.cols(), " states");
-  const Eigen::MatrixXd gdvdz = features_.PushForward(x, gp);
-  Eigen::MatrixXd gy(m, b), gjac(m, d * b);
+  features_.PushForward(x, gp, &ws->gdvdz);
+  ws->gy.resize(m, b);
+  ws->gjac.resize(m, d * b);
   if (form_ == ValueForm::kDirect) {
-    gy = gv.transpose();
-    gjac = Eigen::Map<const Eigen::MatrixXd>(gdvdz.data(), 1, d * b);
+    ws->gy = gv.transpose();
+    ws->gjac = Eigen::Map<const Eigen::MatrixXd>(ws->gdvdz.data(), 1, d * b);
   } else {
-    for (Eigen::Index i = 0; i < b; ++i) {
-      QuadraticHeadBackward(*ws, i, gv[i], gdvdz.col(i), gy.col(i), gjac.middleCols(i * d, d));
-    }
+    ParallelForChunks(static_cast<int>(b), ws->mlp.chunk_size(), threads, [&](int, int begin, int end) {
+      for (int i = begin; i < end; ++i) {
+        QuadraticHeadBackward(*ws, i, gv[i], ws->gdvdz.col(i), ws->gy.col(i), ws->gjac.middleCols(i * d, d));
+      }
+    });
   }
-  net_.Backward(gy, gjac, grad, nullptr, &ws->mlp, threads);
+  net_.Backward(ws->gy, ws->gjac, grad, nullptr, &ws->mlp, threads);
 }
 
 double ResidualLoss(const FirstOrderEquation& equation, const ValueFunction& value, const Eigen::MatrixXd& x,
                     Eigen::VectorXd* grad, ValueWorkspace* ws, int threads) {
   const Eigen::Index b = x.cols();
-  Eigen::MatrixXd p, f_p;
-  Eigen::VectorXd v, f, f_v;
-  value.Evaluate(x, &v, &p, ws, threads);
-  equation.Evaluate(x, v, p, &f, &f_v, &f_p);
+  value.Evaluate(x, &ws->v, &ws->p, ws, threads);
+  equation.Evaluate(x, ws->v, ws->p, &ws->f, &ws->f_v, &ws->f_p, threads);
   if (grad) {
-    // dL/dV_i = 2 F_i F_V,i / B and dL/dp_i = 2 F_i F_p,i / B.
-    const Eigen::VectorXd scale = (2.0 / static_cast<double>(b)) * f;
-    value.Backward(x, scale.cwiseProduct(f_v), f_p * scale.asDiagonal(), grad, ws, threads);
+    // dL/dV_i = 2 F_i F_V,i / B and dL/dp_i = 2 F_i F_p,i / B, from gv = 2 F / B.
+    ws->gv = (2.0 / static_cast<double>(b)) * ws->f;
+    ws->gp = ws->f_p * ws->gv.asDiagonal();
+    ws->gv.array() *= ws->f_v.array();
+    value.Backward(x, ws->gv, ws->gp, grad, ws, threads);
   }
-  return f.squaredNorm() / static_cast<double>(b);
+  return ws->f.squaredNorm() / static_cast<double>(b);
 }
 
 double AnchorLoss(const ValueAnchors& anchors, const ValueFunction& value, Eigen::VectorXd* grad,
-                  ValueWorkspace* ws) {
+                  ValueWorkspace* ws, int threads) {
   const Eigen::Index a = anchors.states.cols();
-  Eigen::VectorXd v;
-  Eigen::MatrixXd p;
-  value.Evaluate(anchors.states, &v, &p, ws);
-  const Eigen::VectorXd r = (v - anchors.values).cwiseQuotient(anchors.scales);
+  value.Evaluate(anchors.states, &ws->v, &ws->p, ws, threads);
+  // The scaled errors r_a = (V_a - v_a) / scale_a are this term's residuals.
+  ws->f = (ws->v - anchors.values).cwiseQuotient(anchors.scales);
   if (grad) {
     // dL/dV_a = 2 w r_a / (A scale_a); V's gradient p does not enter.
-    const Eigen::VectorXd gv = (2.0 * anchors.weight / static_cast<double>(a)) * r.cwiseQuotient(anchors.scales);
-    Eigen::VectorXd g;
-    value.Backward(anchors.states, gv, Eigen::MatrixXd::Zero(p.rows(), a), &g, ws);
-    *grad += g;
+    ws->gv = (2.0 * anchors.weight / static_cast<double>(a)) * ws->f.cwiseQuotient(anchors.scales);
+    ws->gp.setZero(ws->p.rows(), a);
+    value.Backward(anchors.states, ws->gv, ws->gp, &ws->grad, ws, threads);
+    *grad += ws->grad;
   }
-  return anchors.weight * r.squaredNorm() / static_cast<double>(a);
+  return anchors.weight * ws->f.squaredNorm() / static_cast<double>(a);
 }
 
 TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::MatrixXd& states,
@@ -280,7 +289,7 @@ TrainResult SolveResidual(const FirstOrderEquation& equation, const Eigen::Matri
       x.col(static_cast<Eigen::Index>(i)) = states.col(train[static_cast<std::size_t>(positions[i])]);
     }
     const double loss = ResidualLoss(equation, *value, x, grad, &ws, options.threads);
-    return anchors ? loss + AnchorLoss(next_anchors(), *value, grad, &anchor_ws) : loss;
+    return anchors ? loss + AnchorLoss(next_anchors(), *value, grad, &anchor_ws, options.threads) : loss;
   };
   problem.validation_loss = [&] {
     return ResidualLoss(equation, *value, val_states, nullptr, &val_ws, options.threads);

@@ -72,7 +72,7 @@ TEST(TaskHjb, PartialsMatchCentralDifferences) {
   const Eigen::VectorXd v = VectorOf({0.5, 2.0, -1.0});
   Eigen::VectorXd f, f_v;
   Eigen::MatrixXd f_p;
-  hjb.Evaluate(x, v, p, &f, &f_v, &f_p);
+  hjb.Evaluate(x, v, p, &f, &f_v, &f_p, 1);
   const double h = 1e-6;
   for (int i = 0; i < 2; ++i) {
     Eigen::MatrixXd up = p, down = p;
@@ -80,8 +80,8 @@ TEST(TaskHjb, PartialsMatchCentralDifferences) {
     down.row(i).array() -= h;
     Eigen::VectorXd fu, fd, dummy_v;
     Eigen::MatrixXd dummy_p;
-    hjb.Evaluate(x, v, up, &fu, &dummy_v, &dummy_p);
-    hjb.Evaluate(x, v, down, &fd, &dummy_v, &dummy_p);
+    hjb.Evaluate(x, v, up, &fu, &dummy_v, &dummy_p, 1);
+    hjb.Evaluate(x, v, down, &fd, &dummy_v, &dummy_p, 1);
     EXPECT_LT(((fu - fd) / (2 * h) - f_p.row(i).transpose()).cwiseAbs().maxCoeff(), 1e-6);
   }
   EXPECT_EQ(f_v, Eigen::VectorXd::Constant(3, 0.7));
@@ -104,6 +104,34 @@ HjbOptions SmallHjb(int threads) {
   o.train.threads = threads;
   o.seed = 3;
   return o;
+}
+
+// The residual loss and its gradient on the pendulum's structured value: the network's
+// chunks, the quadratic heads and the equation's per-state work shared over threads
+// give the same bits as one thread, also when the batch size changes between calls on
+// one workspace (its buffers resized in place).
+TEST(ResidualLoss, SameBitsOnOneAndTwoThreads) {
+  const ControlTask task = ControlTaskByName("pendulum");
+  HjbOptions options;
+  options.hidden = {24, 24};
+  const ValueFunction value = MakeTaskValueFunction(task, options);
+  const TaskHjb hjb(task, 0.3);
+  Rng rng(5);
+  ValueWorkspace one = value.MakeWorkspace(200, 16), two = value.MakeWorkspace(200, 16);
+  for (const int batch : {200, 37, 200}) {
+    Eigen::MatrixXd x(task.state_size(), batch);
+    for (int j = 0; j < batch; ++j) {
+      for (int i = 0; i < task.state_size(); ++i) x(i, j) = Uniform(rng, task.domain_low[i], task.domain_high[i]);
+    }
+    Eigen::VectorXd grad_one, grad_two;
+    const double loss_one = ResidualLoss(hjb, value, x, &grad_one, &one, 1);
+    const double loss_two = ResidualLoss(hjb, value, x, &grad_two, &two, 2);
+    EXPECT_TRUE(std::isfinite(loss_one) && loss_one > 0.0) << batch;
+    EXPECT_EQ(loss_one, loss_two) << batch;
+    ASSERT_EQ(grad_one.size(), value.net().num_parameters());
+    EXPECT_EQ(grad_one, grad_two) << batch;
+    EXPECT_GT(grad_one.norm(), 0.0) << batch;
+  }
 }
 
 // Each rollout anchor is the discounted cost-to-go of a run of the value's policy from

@@ -75,10 +75,10 @@ TEST(LinearQuadraticHjb, QuadraticSolutionHasZeroResidual) {
   const Eigen::VectorXd v = (x.cwiseProduct(p * x)).colwise().sum().transpose();
   Eigen::VectorXd f, f_v;
   Eigen::MatrixXd f_p;
-  equation.Evaluate(x, v, 2.0 * p * x, &f, &f_v, &f_p);
+  equation.Evaluate(x, v, 2.0 * p * x, &f, &f_v, &f_p, 1);
   EXPECT_LT(f.cwiseAbs().maxCoeff(), 1e-12);
   // A wrong P (scaled) does not.
-  equation.Evaluate(x, 1.1 * v, 2.2 * p * x, &f, &f_v, &f_p);
+  equation.Evaluate(x, 1.1 * v, 2.2 * p * x, &f, &f_v, &f_p, 1);
   EXPECT_GT(f.cwiseAbs().maxCoeff(), 1e-2);
 }
 

@@ -150,18 +150,23 @@ struct InputFeatures {
     return p;
   }
 
-  /// dL/dz = D dL/dp (size(n) x B) from dL/dp (n x B) at inputs x: the transpose of PullBack.
-  Eigen::MatrixXd PushForward(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dldp) const {
+  /// dL/dz = D dL/dp (size(n) x B; resized) from dL/dp (n x B) at inputs x: the
+  /// transpose of PullBack.
+  void PushForward(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dldp, Eigen::MatrixXd* g) const {
     const int n = static_cast<int>(x.rows());
-    Eigen::MatrixXd g(size(n), x.cols());
+    g->resize(size(n), x.cols());
     ForEachInput(n, [&](int i, int f, bool per) {
       if (per) {
-        g.row(f) = dldp.row(i).cwiseProduct(x.row(i).array().cos().matrix());
-        g.row(f + 1) = -dldp.row(i).cwiseProduct(x.row(i).array().sin().matrix());
+        g->row(f) = dldp.row(i).cwiseProduct(x.row(i).array().cos().matrix());
+        g->row(f + 1) = -dldp.row(i).cwiseProduct(x.row(i).array().sin().matrix());
       } else {
-        g.row(f) = dldp.row(i);
+        g->row(f) = dldp.row(i);
       }
     });
+  }
+  Eigen::MatrixXd PushForward(const Eigen::MatrixXd& x, const Eigen::MatrixXd& dldp) const {
+    Eigen::MatrixXd g;
+    PushForward(x, dldp, &g);
     return g;
   }
 };

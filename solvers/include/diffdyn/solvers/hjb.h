@@ -66,8 +66,9 @@ class TaskHjb final : public FirstOrderEquation {
   /// effect other than viscous friction.
   TaskHjb(const ControlTask& task, double rho);
   int state_size() const override { return task_.state_size(); }
+  /// The states' a(x), B(x) and policy, in chunks of 64 states over `threads`.
   void Evaluate(const Eigen::MatrixXd& x, const Eigen::VectorXd& v, const Eigen::MatrixXd& p, Eigen::VectorXd* f,
-                Eigen::VectorXd* f_v, Eigen::MatrixXd* f_p) const override;
+                Eigen::VectorXd* f_v, Eigen::MatrixXd* f_p, int threads) const override;
 
   /// The discount rho (1/s).
   double rho() const { return rho_; }

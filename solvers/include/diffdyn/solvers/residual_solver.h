@@ -47,9 +47,10 @@ class FirstOrderEquation {
   /// n, the state size.
   virtual int state_size() const = 0;
   /// F (B), dF/dV (B) and dF/dp (n x B) at states x (n x B), values v (B) and
-  /// gradients p (n x B).
+  /// gradients p (n x B), resized in place. `threads` (<= 0: all cores) may share
+  /// independent per-state work; the results must not depend on it.
   virtual void Evaluate(const Eigen::MatrixXd& x, const Eigen::VectorXd& v, const Eigen::MatrixXd& p,
-                        Eigen::VectorXd* f, Eigen::VectorXd* f_v, Eigen::MatrixXd* f_p) const = 0;
+                        Eigen::VectorXd* f, Eigen::VectorXd* f_v, Eigen::MatrixXd* f_p, int threads) const = 0;
 };
 
 /// F = rho V - x^T Q x - p^T A x + (1/4) p^T B R^-1 B^T p (file comment): A n x n,
@@ -61,7 +62,7 @@ class LinearQuadraticHjb final : public FirstOrderEquation {
                      double rho);
   int state_size() const override { return static_cast<int>(a_.rows()); }
   void Evaluate(const Eigen::MatrixXd& x, const Eigen::VectorXd& v, const Eigen::MatrixXd& p, Eigen::VectorXd* f,
-                Eigen::VectorXd* f_v, Eigen::MatrixXd* f_p) const override;
+                Eigen::VectorXd* f_v, Eigen::MatrixXd* f_p, int threads) const override;
   /// The known solution's P (n x n): V = x^T P x.
   Eigen::MatrixXd SolutionMatrix() const;
 
@@ -82,11 +83,19 @@ enum class ValueForm {
   kQuadratic,
 };
 
-/// Scratch of ValueFunction's batched passes: the network's tape, features z,
-/// outputs y and stacked Jacobians (mlp.h). One per thread of work.
+/// Scratch of ValueFunction's batched passes and of the losses built on them: the
+/// network's tape, features z, outputs y and stacked Jacobians (mlp.h), then buffers
+/// resized in place, so a training loop allocates nothing once its batch size has been
+/// seen. One per thread of work.
 struct ValueWorkspace {
   MlpWorkspace mlp;
   Eigen::MatrixXd z, y, jac;
+  /// dV/dz (d x B); Backward's dL/d(dV/dz) (d x B), dL/dy (m x B) and dL/dJ (m x d B).
+  Eigen::MatrixXd dvdz, gdvdz, gy, gjac;
+  /// The losses': V, the residuals, F_V and dL/dV (B each); p, F_p and dL/dp (n x B);
+  /// an added term's parameter gradient.
+  Eigen::VectorXd v, f, f_v, gv, grad;
+  Eigen::MatrixXd p, f_p, gp;
 };
 
 /// A scalar function V on a state domain of n components, with p = dV/dx in closed
@@ -115,7 +124,9 @@ class ValueFunction {
   /// A workspace for batches of up to max_batch states.
   ValueWorkspace MakeWorkspace(int max_batch, int chunk_size = MlpWorkspace::kDefaultChunkSize) const;
 
-  /// V (B) and p (n x B) at states x (n x B); keeps in ws what Backward needs.
+  /// V (B) and p (n x B) at states x (n x B); keeps in ws what Backward needs. The
+  /// network's chunks and the quadratic form's per-state heads run on `threads`
+  /// (<= 0: all cores), with the same results at any count.
   void Evaluate(const Eigen::MatrixXd& x, Eigen::VectorXd* v, Eigen::MatrixXd* p, ValueWorkspace* ws,
                 int threads = 1) const;
   /// The same with a workspace of its own (allocates).
@@ -162,7 +173,7 @@ struct ValueAnchors {
 /// The anchor term weight * mean_a ((V(x_a) - v_a) / scale_a)^2 of `anchors` and, if
 /// grad is not null, its gradient added to *grad (the network's parameter count), on ws.
 double AnchorLoss(const ValueAnchors& anchors, const ValueFunction& value, Eigen::VectorXd* grad,
-                  ValueWorkspace* ws);
+                  ValueWorkspace* ws, int threads = 1);
 
 /// Minimises the mean squared residual over the columns of `states` (n x N; a
 /// seeded fraction options.val_fraction held out), plus the anchor term of `anchors`
