@@ -90,6 +90,15 @@ struct QuadraticSample {
   }
 };
 
+// Runs per_state(i) for each of the b states: every state's head is independent, so
+// the network workspace's chunks go over the threads (the same bits at any count).
+template <typename PerState>
+void ForEachState(Eigen::Index b, const ValueWorkspace& ws, int threads, PerState&& per_state) {
+  ParallelForChunks(static_cast<int>(b), ws.mlp.chunk_size(), threads, [&](int, int begin, int end) {
+    for (int i = begin; i < end; ++i) per_state(i);
+  });
+}
+
 }  // namespace
 
 ValueFunction::ValueFunction(Mlp<double> net, int n, InputFeatures features, ValueForm form, Eigen::VectorXd goal,
@@ -166,16 +175,13 @@ void ValueFunction::Evaluate(const Eigen::MatrixXd& x, Eigen::VectorXd* v, Eigen
   const Eigen::Index b = x.cols(), d = net_.num_inputs();
   features_.Encode(x, &ws->z);
   net_.Forward(ws->z, &ws->y, &ws->jac, &ws->mlp, threads);
-  v->resize(b);
-  ws->dvdz.resize(d, b);
   if (form_ == ValueForm::kDirect) {
     *v = ws->y.row(0).transpose();
     ws->dvdz = Eigen::Map<const Eigen::MatrixXd>(ws->jac.data(), d, b);
   } else {
-    // Each state's head is independent: chunks of the network's size over the threads.
-    ParallelForChunks(static_cast<int>(b), ws->mlp.chunk_size(), threads, [&](int, int begin, int end) {
-      for (int i = begin; i < end; ++i) QuadraticHead(*ws, i, &(*v)[i], ws->dvdz.col(i));
-    });
+    v->resize(b);
+    ws->dvdz.resize(d, b);
+    ForEachState(b, *ws, threads, [&](int i) { QuadraticHead(*ws, i, &(*v)[i], ws->dvdz.col(i)); });
   }
   features_.PullBack(x, ws->dvdz, p);
 }
@@ -191,16 +197,14 @@ void ValueFunction::Backward(const Eigen::MatrixXd& x, const Eigen::VectorXd& gv
   DIFFDYN_CHECK(ws->z.cols() == b && gv.size() == b && gp.rows() == n_ && gp.cols() == b,
                 "ValueFunction::Backward: cotangents must match the last Evaluate's ", ws->z.cols(), " states");
   features_.PushForward(x, gp, &ws->gdvdz);
-  ws->gy.resize(m, b);
-  ws->gjac.resize(m, d * b);
   if (form_ == ValueForm::kDirect) {
     ws->gy = gv.transpose();
     ws->gjac = Eigen::Map<const Eigen::MatrixXd>(ws->gdvdz.data(), 1, d * b);
   } else {
-    ParallelForChunks(static_cast<int>(b), ws->mlp.chunk_size(), threads, [&](int, int begin, int end) {
-      for (int i = begin; i < end; ++i) {
-        QuadraticHeadBackward(*ws, i, gv[i], ws->gdvdz.col(i), ws->gy.col(i), ws->gjac.middleCols(i * d, d));
-      }
+    ws->gy.resize(m, b);
+    ws->gjac.resize(m, d * b);
+    ForEachState(b, *ws, threads, [&](int i) {
+      QuadraticHeadBackward(*ws, i, gv[i], ws->gdvdz.col(i), ws->gy.col(i), ws->gjac.middleCols(i * d, d));
     });
   }
   net_.Backward(ws->gy, ws->gjac, grad, nullptr, &ws->mlp, threads);
