@@ -6,7 +6,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <limits>
+#include <vector>
 
 #include <Eigen/Dense>
 
@@ -72,6 +74,69 @@ TEST(Gemm, FloatOperandsMatchTheDoubleProductToFloatRounding) {
     EXPECT_LT(gap, k * std::numeric_limits<float>::epsilon()) << "ta " << ta;
     EXPECT_GT(gap, 0.0) << "ta " << ta << ": the product ran in double";
   }
+}
+
+// C with 1 to 17 rows and sums of 1 to 300 terms (the thin kernel runs 2 to two SIMD
+// vectors' rows and at most 256 terms where it is
+// built, BLAS or Eigen the others): both layouts of B, alpha and beta, beta = 0 over
+// NaN, strided blocks, and A as an exactly sized buffer (its last columns must not be
+// read past the end: the sanitizer build checks).
+template <typename S>
+void CheckThinProducts() {
+  using Matrix = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
+  const S nan = std::numeric_limits<S>::quiet_NaN();
+  for (int m : {1, 2, 3, 6, 8, 9, 16, 17}) {
+    for (int k : {1, 5, 100, 300}) {
+      for (bool tb : {false, true}) {
+        const int n = 13;
+        std::vector<S> a_data(std::size_t(m) * k);
+        Eigen::Map<Matrix> a(a_data.data(), m, k);
+        a = Matrix::Random(m, k);
+        Matrix big_b = Matrix::Random(k + n + 4, k + n + 4);
+        const auto b = big_b.block(1, 2, tb ? n : k, tb ? k : n);
+        const Eigen::MatrixXd op_b = tb ? Eigen::MatrixXd(b.transpose().template cast<double>())
+                                        : Eigen::MatrixXd(b.template cast<double>());
+        const Eigen::MatrixXd exact = a.template cast<double>() * op_b;
+        Matrix c_big = Matrix::Random(m + 3, n + 2);
+        const Eigen::MatrixXd c0 = c_big.topLeftCorner(m, n).template cast<double>();
+        const Matrix outside = c_big.bottomRows(3);
+        Gemm(S(0.5), a, false, b, tb, S(2), c_big.topLeftCorner(m, n));
+        const double tol = 4.0 * (k + 2) * std::numeric_limits<S>::epsilon();
+        EXPECT_LT((c_big.topLeftCorner(m, n).template cast<double>() - (2.0 * c0 + 0.5 * exact))
+                      .cwiseAbs()
+                      .maxCoeff(),
+                  tol)
+            << "m " << m << " k " << k << " tb " << tb;
+        EXPECT_EQ(c_big.bottomRows(3), outside);
+        c_big.topLeftCorner(m, n).setConstant(nan);
+        Gemm(S(1), a, false, b, tb, S(0), c_big.topLeftCorner(m, n));
+        EXPECT_LT((c_big.topLeftCorner(m, n).template cast<double>() - exact).cwiseAbs().maxCoeff(),
+                  tol)
+            << "m " << m << " k " << k << " tb " << tb;
+      }
+    }
+  }
+}
+
+TEST(Gemm, ThinProductsMatchTheExactProductInDoubleAndFloat) {
+  CheckThinProducts<double>();
+  CheckThinProducts<float>();
+}
+
+// The thin kernel sums each entry over k in order from zero, then adds it to C:
+// the same arithmetic as one accumulator per entry, so splitting the columns of
+// B (a different grouping) gives the same bits.
+TEST(Gemm, ThinProductDoesNotDependOnTheColumnGrouping) {
+  if (!kHaveLayerKernel) GTEST_SKIP() << "the thin kernel is built for AVX2 or AVX-512 only";
+  const Eigen::MatrixXf a = Eigen::MatrixXf::Random(6, 100);
+  const Eigen::MatrixXf b = Eigen::MatrixXf::Random(100, 250);
+  Eigen::MatrixXf whole = Eigen::MatrixXf::Ones(6, 250), parts = whole;
+  Gemm(1.0f, a, false, b, false, 1.0f, whole);
+  for (int s = 0; s < 250; s += 7) {
+    const int w = std::min(7, 250 - s);
+    Gemm(1.0f, a, false, b.middleCols(s, w), false, 1.0f, parts.middleCols(s, w));
+  }
+  EXPECT_TRUE(whole == parts) << "largest gap " << (whole - parts).cwiseAbs().maxCoeff();
 }
 
 }  // namespace

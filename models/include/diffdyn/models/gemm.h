@@ -15,6 +15,16 @@
 // (double or float): MatrixXd or MatrixXf, their blocks
 // (leftCols, middleCols, topLeftCorner, ...) and Maps of them.
 //
+// Products whose C has few rows (2 to 2 SIMD vectors of them: a network's thin
+// output layer, 6 x 100 times 100 x 250) run a kernel of their own where the
+// layer kernel is built (internal::ThinGemm): BLAS packs the whole 100 x 250
+// operand for 150 k multiply-adds there and ran these shapes 1.4-2.6x slower on a
+// Zen 3 core (float and double, 2026-12-01). Its sums run in the order of
+// BLAS's kernels (k = 0, 1, ... from zero, then added to beta C): the abs-NODE
+// and res-NN trained on it are byte-identical to those of the BLAS products.
+// OpenBLAS sums some other shapes in another order (one column goes to its gemv,
+// and its kernel's column tails), where results differ in the last bits.
+//
 // Threads: diffdyn splits batches over its own threads in fixed chunks, so a
 // threaded BLAS inside each chunk would only oversubscribe the cores. The
 // first product therefore sets OpenBLAS (when it is the BLAS in use) to one
@@ -24,7 +34,10 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <cstddef>
 #include <type_traits>
+
+#include "diffdyn/models/layer_kernel.h"
 
 #if defined(DIFFDYN_HAVE_BLAS)
 extern "C" {
@@ -53,6 +66,88 @@ inline void UseOneBlasThread() {
   }();
   (void)once;
 }
+}  // namespace internal
+#endif
+
+#if DIFFDYN_LAYER_KERNEL
+namespace internal {
+
+/// Rows of C up to which Gemm runs ThinGemm (two SIMD vectors of S).
+template <typename S>
+inline constexpr int kThinGemmMaxRows = 2 * kLayerVectorBytes / static_cast<int>(sizeof(S));
+
+/// Longest sum (inner size k) Gemm gives ThinGemm. BLAS sums longer ones in
+/// blocks (OpenBLAS's double kernels for Zen: blocks of 256), which ThinGemm's
+/// one running sum would round differently.
+inline constexpr int kThinGemmMaxInner = 256;
+
+// Columns [s, s + G) of C = beta C + alpha A op(B) for ThinGemm, G a compile-time
+// count (g < G runs the kernel of g columns). Each column of C is V vectors of
+// accumulators; per k one load of A's column and one broadcast of op(B)[j, s + q]
+// per column q. A's columns are read in place while a full V-vector load stays
+// inside A (its entries past row m only reach lanes that are never stored), the
+// last few through a zero-padded copy.
+template <typename S, int V, int G, bool kTransB>
+inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, int ldb, S beta,
+                        S* c, int ldc, int s, int g) {
+  if constexpr (G > 1) {
+    if (g < G)
+      return ThinColumns<S, V, G - 1, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s, g);
+  }
+  using Vec = typename LayerVectors<S>::Vec;
+  using VecU = typename LayerVectors<S>::VecU;
+  constexpr int kLanes = kLayerVectorBytes / static_cast<int>(sizeof(S));
+  Vec acc[G][V];
+  for (int q = 0; q < G; ++q) {
+    for (int v = 0; v < V; ++v) acc[q][v] = Vec{};
+  }
+  auto step = [&](int j, const S* col) {
+    Vec x[V];
+    for (int v = 0; v < V; ++v) x[v] = *reinterpret_cast<const VecU*>(col + v * kLanes);
+    for (int q = 0; q < G; ++q) {
+      const S bj =
+          kTransB ? b[(s + q) + std::ptrdiff_t(j) * ldb] : b[j + std::ptrdiff_t(s + q) * ldb];
+      for (int v = 0; v < V; ++v) acc[q][v] += bj * x[v];
+    }
+  };
+  const std::ptrdiff_t end = std::ptrdiff_t(k - 1) * lda + m;  // one past A's last entry
+  int in_place = 0;
+  if (end >= V * kLanes)
+    in_place = static_cast<int>(std::min<std::ptrdiff_t>(k, (end - V * kLanes) / lda + 1));
+  for (int j = 0; j < in_place; ++j) step(j, a + std::ptrdiff_t(j) * lda);
+  for (int j = in_place; j < k; ++j) {
+    alignas(kLayerVectorBytes) S padded[V * kLanes] = {};
+    std::copy_n(a + std::ptrdiff_t(j) * lda, m, padded);
+    step(j, padded);
+  }
+  for (int q = 0; q < G; ++q) {
+    S* col = c + std::ptrdiff_t(s + q) * ldc;
+    for (int i = 0; i < m; ++i) {
+      const S t = alpha * acc[q][i / kLanes][i % kLanes];
+      col[i] = beta == S(0) ? t : beta * col[i] + t;
+    }
+  }
+}
+
+/// C = beta C + alpha A op(B) for C with few rows: A m x k (column-major,
+/// leading dimension lda), op(B) k x n with op(B)[j, s] = B[j + s ldb], or
+/// B[s + j ldb] if kTransB; C m x n (ldc); m <= V SIMD vectors of S. Columns of
+/// C in groups of 8 (one vector per column) or 6 (two), each entry summed over
+/// j = 0, 1, ... from zero, then alpha times the sum added to beta C (beta = 0
+/// overwrites C). With a pointer and leading dimension per operand, so callers
+/// need no Eigen types.
+template <typename S, int V, bool kTransB>
+inline void ThinGemm(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb, S beta,
+                     S* c, int ldc) {
+  constexpr int kGroup = V == 1 ? 8 : 6;
+  int s = 0;
+  for (; s + kGroup <= n; s += kGroup) {
+    ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s, kGroup);
+  }
+  if (s < n)
+    ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s, n - s);
+}
+
 }  // namespace internal
 #endif
 
@@ -100,8 +195,39 @@ void Gemm(typename DC::Scalar alpha, const Eigen::MatrixBase<DA>& a, bool transp
     }
     return;
   }
+#if DIFFDYN_LAYER_KERNEL
+  // C of 2 to two vectors' rows: the thin kernel (one row: BLAS was faster).
+  if (!transpose_a && m >= 2 && m <= internal::kThinGemmMaxRows<S> &&
+      k <= internal::kThinGemmMaxInner) {
+    const int mi = static_cast<int>(m), ni = static_cast<int>(n), ki = static_cast<int>(k);
+    const int lda = static_cast<int>(std::max<Eigen::Index>(1, a.derived().outerStride()));
+    const int ldb = static_cast<int>(std::max<Eigen::Index>(1, b.derived().outerStride()));
+    const int ldc = static_cast<int>(std::max<Eigen::Index>(1, c.derived().outerStride()));
+    constexpr int kLanes = internal::kThinGemmMaxRows<S> / 2;
+    const S* pa = a.derived().data();
+    const S* pb = b.derived().data();
+    S* pc = c.derived().data();
+    if (m <= kLanes) {
+      transpose_b
+          ? internal::ThinGemm<S, 1, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc)
+          : internal::ThinGemm<S, 1, false>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc);
+    } else {
+      transpose_b
+          ? internal::ThinGemm<S, 2, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc)
+          : internal::ThinGemm<S, 2, false>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc);
+    }
+    return;
+  }
+#endif
 #if defined(DIFFDYN_HAVE_BLAS)
   internal::UseOneBlasThread();
+  // beta = 0 as a fill of our own, then beta = 1: BLAS's own beta pass took 6-9 us
+  // more than the fill for a 100 x 250 C (Zen 3, float and double). BLAS scales C
+  // by beta before it accumulates, so the result has the same bits.
+  if (beta == S(0)) {
+    c.setZero();
+    beta = S(1);
+  }
   const char ta = transpose_a ? 'T' : 'N';
   const char tb = transpose_b ? 'T' : 'N';
   const int mi = static_cast<int>(m), ni = static_cast<int>(n), ki = static_cast<int>(k);
