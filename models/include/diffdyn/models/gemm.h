@@ -74,7 +74,7 @@ namespace internal {
 
 /// Rows of C up to which Gemm runs ThinGemm (two SIMD vectors of S).
 template <typename S>
-inline constexpr int kThinGemmMaxRows = 2 * kLayerVectorBytes / static_cast<int>(sizeof(S));
+inline constexpr int kThinGemmMaxRows = 2 * LayerShape<S>::kLanes;
 
 /// Longest sum (inner size k) Gemm gives ThinGemm. BLAS sums longer ones in
 /// blocks (OpenBLAS's double kernels for Zen: blocks of 256), which ThinGemm's
@@ -96,7 +96,7 @@ inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, 
   }
   using Vec = typename LayerVectors<S>::Vec;
   using VecU = typename LayerVectors<S>::VecU;
-  constexpr int kLanes = kLayerVectorBytes / static_cast<int>(sizeof(S));
+  constexpr int kLanes = LayerShape<S>::kLanes;
   Vec acc[G][V];
   for (int q = 0; q < G; ++q) {
     for (int v = 0; v < V; ++v) acc[q][v] = Vec{};
@@ -203,11 +203,10 @@ void Gemm(typename DC::Scalar alpha, const Eigen::MatrixBase<DA>& a, bool transp
     const int lda = static_cast<int>(std::max<Eigen::Index>(1, a.derived().outerStride()));
     const int ldb = static_cast<int>(std::max<Eigen::Index>(1, b.derived().outerStride()));
     const int ldc = static_cast<int>(std::max<Eigen::Index>(1, c.derived().outerStride()));
-    constexpr int kLanes = internal::kThinGemmMaxRows<S> / 2;
     const S* pa = a.derived().data();
     const S* pb = b.derived().data();
     S* pc = c.derived().data();
-    if (m <= kLanes) {
+    if (m <= internal::LayerShape<S>::kLanes) {
       transpose_b
           ? internal::ThinGemm<S, 1, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc)
           : internal::ThinGemm<S, 1, false>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc);

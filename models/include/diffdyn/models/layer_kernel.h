@@ -11,8 +11,8 @@
 //
 //   C = g(W H + b),   W m x k column-major (leading dimension m), b of size m,
 //
-// is computed in register tiles of kLayerRows units x kLayerBlock samples: per
-// input unit one vector load per kLayerBlock / kLayerLanes samples and one
+// is computed in register tiles of LayerShape::kRows units x kLayerBlock samples: per
+// input unit one vector load per LayerShape::kLanes samples and one
 // broadcast weight per output unit, with the bias as the accumulators' start
 // and ReLU applied before the single store. Nothing is packed and no pass over
 // memory is spent on the bias or the activation. Every sample's sum is taken
