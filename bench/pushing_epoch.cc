@@ -69,10 +69,15 @@ void RunEpochs(benchmark::State& state, Method method, Precision precision = Pre
   options.progress = false;
   Trainer trainer(&model, options);
   trainer.Train(Data());  // warm-up: buffers sized
+  TrainResult r;
   for (auto _ : state) {
-    const TrainResult r = trainer.Train(Data());
+    r = trainer.Train(Data());
     benchmark::DoNotOptimize(r.final_train_loss);
   }
+  // Solver steps of the last epoch, summed over the chunks (each chunk of an adaptive
+  // method picks its own step sizes).
+  state.counters["steps"] = static_cast<double>(r.solver_steps);
+  state.counters["rejected"] = static_cast<double>(r.rejected_steps);
   if (method == Method::kRk4) {
     const double flops = 3.0 * kFlopsPerEval * 36 * kTransitions;
     state.counters["GFLOP/s"] =

@@ -5,12 +5,15 @@ One training epoch of the absolute NeuralODE of the NeuralODE-Panda paper in pla
 PyTorch, float64 and float32: z0 = [x, u] (6), dz/dt = MLP(z) (6-100-100-6, ReLU),
 Kutta's 3/8-rule RK4 over 9 equal steps on [0, 1] written out in torch (what
 torchdiffeq's "rk4" does, without its bookkeeping), autograd back through the
-solver, SE(2) pose loss, Adam lr 1e-3, 1000 transitions of the shared data in
+solver; and in float64 the same with adaptive dopri5 (tolerance 1e-8, first trial
+step 1/9, one step size per batch; torch_common.dopri5_flow), SE(2) pose loss, Adam lr 1e-3, 1000 transitions of the shared data in
 shuffled batches of 500. Runs in both two-core configurations (torch 2 threads with
 OpenBLAS 1, torch 1 with OpenBLAS 2), each in its own process, and keeps the faster
-per precision. If the C++ results of the same run are next to --out
+per workload. If the C++ results of the same run are next to --out
 (pushing_epoch.json), prints ours (the default chunk of 250, best thread count)
-over PyTorch's best, and ours in GFLOP/s against the same-precision two-thread peak.
+over PyTorch's best, and for rk4 ours in GFLOP/s against the same-precision
+two-thread peak. dopri5 picks its own steps on each side (ours per chunk of 250,
+PyTorch per batch of 500): both step counts are printed (stderr, benchmark counters).
 
     /usr/bin/python3 bench/pushing_epoch_torch.py --out r.json
     DIFFDYN_PUSHING_CSV=path overrides the data file.
@@ -19,10 +22,12 @@ import json
 import os
 import re
 
+import sys
+
 import torch
 
-from torch_common import (describe_torch, write_comparison_csv, ours_best, read_transitions, reference_beside_ours,
-                          repo_path, rk4_38_flow, se2_pose_loss, time_it)
+from torch_common import (describe_torch, dopri5_flow, write_comparison_csv, ours_best, read_transitions,
+                          reference_beside_ours, repo_path, rk4_38_flow, se2_pose_loss, time_it)
 
 TRANSITIONS = 1000
 BATCH = 500
@@ -30,16 +35,24 @@ DATA = os.environ.get("DIFFDYN_PUSHING_CSV", "../shared/data/pybullet_pushing/co
 
 
 class AbsNode(torch.nn.Module):
-    def __init__(self, dtype, hidden=100, steps=10):
+    def __init__(self, dtype, hidden=100, steps=10, method="rk4"):
         super().__init__()
         self.net = torch.nn.Sequential(
             torch.nn.Linear(6, hidden), torch.nn.ReLU(),
             torch.nn.Linear(hidden, hidden), torch.nn.ReLU(),
             torch.nn.Linear(hidden, 6)).to(dtype)
         self.steps = steps
+        self.method = method
+        self.accepted = self.rejected = 0
 
     def forward(self, x, u):
-        return rk4_38_flow(self.net, torch.cat([x, u], dim=1), self.steps)[:, :3]
+        z = torch.cat([x, u], dim=1)
+        if self.method == "rk4":
+            return rk4_38_flow(self.net, z, self.steps)[:, :3]
+        z, accepted, rejected = dopri5_flow(self.net, z, 1.0 / (self.steps - 1), 1e-8)
+        self.accepted += accepted
+        self.rejected += rejected
+        return z[:, :3]
 
 
 def epoch(model, opt, x, u, y, gen):
@@ -59,22 +72,27 @@ def measure(torch_threads):
     path = repo_path(DATA)
     data = read_transitions(path, TRANSITIONS)
     result = {}
-    for name, dtype in (("float64", torch.float64), ("float32", torch.float32)):
+    for name, dtype, method in (("float64", torch.float64, "rk4"), ("float32", torch.float32, "rk4"),
+                                ("float64", torch.float64, "dopri5")):
         x, u, y = (v.to(dtype) for v in data)
         torch.manual_seed(1)
-        model = AbsNode(dtype)
+        model = AbsNode(dtype, method=method)
         opt = torch.optim.Adam(model.parameters(), lr=1e-3)
         gen = torch.Generator().manual_seed(2)
-        result[f"{name}/epoch_abs_node_rk4"] = time_it(lambda: epoch(model, opt, x, u, y, gen), 7)[0]
+        result[f"{name}/epoch_abs_node_{method}"] = time_it(lambda: epoch(model, opt, x, u, y, gen), 7)[0]
+        if method == "dopri5":
+            epochs = 8  # the warm-up and 7 timed
+            print(f"  {name} dopri5: {model.accepted / epochs:.1f} accepted and {model.rejected / epochs:.1f} "
+                  f"rejected steps per epoch (2 batches)", file=sys.stderr)
     return result
 
 
-def precision_of(name):
-    """Our rk4 epoch runs at the default chunk (250) by precision; None for the others."""
-    if re.match(r"BM_EpochAbsNodeRk4/threads:\d+/chunk:250/", name):
-        return "float64"
-    if re.match(r"BM_EpochAbsNodeRk4F32/threads:\d+/chunk:250/", name):
-        return "float32"
+def workload_of(name):
+    """(precision, method) of our epoch runs at the default chunk (250); None for the others."""
+    for pattern, key in ((r"BM_EpochAbsNodeRk4/", ("float64", "rk4")), (r"BM_EpochAbsNodeRk4F32/", ("float32", "rk4")),
+                         (r"BM_EpochAbsNodeDopri5/", ("float64", "dopri5"))):
+        if re.match(pattern + r"threads:\d+/chunk:250/", name):
+            return key
     return None
 
 
@@ -88,28 +106,32 @@ def main():
     if run is None or run[3] is None:
         return
     args, by_config, best, path = run
-    ours = ours_best(path, precision_of)
+    ours = ours_best(path, workload_of)
     with open(path) as f:
         runs = json.load(f)["benchmarks"]
     peaks = {"float64": peak_of(runs, "BM_PeakDgemmOpenBlas2Threads"),
              "float32": peak_of(runs, "BM_PeakSgemmOpenBlas2Threads")}
     summary, rows = {}, []
-    for precision, (seconds, name) in sorted(ours.items()):
-        torch_s = best[f"{precision}/epoch_abs_node_rk4"]["seconds"]
-        rows.append(("epoch_abs_node_rk4", precision, name, seconds,
-                     best[f"{precision}/epoch_abs_node_rk4"]["config"], torch_s))
+    for (precision, method), (seconds, name) in sorted(ours.items()):
+        workload = f"epoch_abs_node_{method}"
+        torch_s = best[f"{precision}/{workload}"]["seconds"]
+        rows.append((workload, precision, name, seconds, best[f"{precision}/{workload}"]["config"], torch_s))
         run = next(r for r in runs if r["name"] == name)
-        rate = run.get("epoch_flops_G", 0.0) / seconds
-        peak = peaks[precision]
-        line = (f"{precision}: ours {name} {seconds * 1e3:.1f} ms, PyTorch best "
-                f"{torch_s * 1e3:.1f} ms, ours / PyTorch = {seconds / torch_s:.2f}x; "
-                f"ours {rate:.1f} GFLOP/s")
-        if peak:
-            line += f" = {100 * rate / peak:.0f}% of the two-thread peak {peak:.1f} GFLOP/s"
+        line = (f"{precision} {method}: ours {name} {seconds * 1e3:.1f} ms, PyTorch best "
+                f"{torch_s * 1e3:.1f} ms, ours / PyTorch = {seconds / torch_s:.2f}x")
+        entry = {"ours_seconds": seconds, "torch_seconds": torch_s, "ours_over_torch": seconds / torch_s}
+        if method == "rk4":
+            rate = run.get("epoch_flops_G", 0.0) / seconds
+            peak = peaks[precision]
+            line += f"; ours {rate:.1f} GFLOP/s"
+            if peak:
+                line += f" = {100 * rate / peak:.0f}% of the two-thread peak {peak:.1f} GFLOP/s"
+            entry.update({"ours_gflops": rate, "peak_gflops": peak})
+        else:
+            line += f" (ours {run.get('steps', 0):.0f} steps over 4 chunks, {run.get('rejected', 0):.0f} rejected)"
+            entry.update({"ours_steps": run.get("steps"), "ours_rejected": run.get("rejected")})
         print(line)
-        summary[precision] = {"ours_seconds": seconds, "torch_seconds": torch_s,
-                              "ours_over_torch": seconds / torch_s, "ours_gflops": rate,
-                              "peak_gflops": peak}
+        summary[f"{precision}/{method}"] = entry
     with open(args.out, "w") as f:
         json.dump({"by_config": by_config, "best": best, "summary": summary}, f, indent=1)
     write_comparison_csv(args.out, rows)

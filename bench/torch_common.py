@@ -37,6 +37,51 @@ def rk4_38_flow(f, z, steps):
     return z
 
 
+# Dormand & Prince (1980) 5(4) pair: stage rows a, 5th-order weights b (= the last
+# row of a, FSAL) and the 4th-order embedded weights b_hat.
+DOPRI5_A = [[],
+            [1 / 5],
+            [3 / 40, 9 / 40],
+            [44 / 45, -56 / 15, 32 / 9],
+            [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729],
+            [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656],
+            [35 / 384, 0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84]]
+DOPRI5_B_HAT = [5179 / 57600, 0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40]
+
+
+def dopri5_flow(f, z, first_step, tol):
+    """z(1) of dz/dt = f(z) from z(0) = z by adaptive dopri5 with one step size for the
+    batch, as diffdyn's batched solver: error ratio the RMS over all entries of
+    err / (tol + tol max(|z|, |z_new|)), accepted when <= 1, next step
+    h min(10, max(0.2, 0.9 ratio^(-1/5))) (the retry after a rejection at most h),
+    the first trial step `first_step`, the last stage reused (FSAL). The error control
+    runs outside autograd; backward goes through the accepted steps, as backprop
+    through torchdiffeq's solver does. Returns (z(1), accepted, rejected)."""
+    t, dt, accepted, rejected = 0.0, first_step, 0, 0
+    k_first = f(z)
+    while t < 1.0:
+        clipped = dt >= 1.0 - t
+        h = 1.0 - t if clipped else dt
+        k = [k_first]
+        for row in DOPRI5_A[1:]:
+            k.append(f(z + h * sum(a * ki for a, ki in zip(row, k) if a != 0)))
+        z_new = z + h * sum(b * ki for b, ki in zip(DOPRI5_A[6], k) if b != 0)
+        with torch.no_grad():
+            err = h * sum((b - bh) * ki for b, bh, ki in zip(DOPRI5_A[6] + [0.0], DOPRI5_B_HAT, k))
+            scale = tol + tol * torch.maximum(z.abs(), z_new.abs())
+            ratio = (err / scale).double().square().mean().sqrt().item()
+        factor = 10.0 if ratio == 0 else min(10.0, max(0.2, 0.9 * ratio ** -0.2))
+        if ratio <= 1.0:
+            z, k_first = z_new, k[6]
+            accepted += 1
+            t = 1.0 if clipped else t + h
+            dt = max(dt, h * factor) if clipped else h * factor
+        else:
+            rejected += 1
+            dt = h * min(1.0, factor)
+    return z, accepted, rejected
+
+
 # rg of the 0.1 m square block: sqrt((l^2 + w^2) / 12).
 POSE_RG = math.sqrt((0.1 ** 2 + 0.1 ** 2) / 12)
 
