@@ -17,8 +17,7 @@ import numpy as np
 import torch
 
 import diffdyn
-from mppi_pushing_torch import load_mlp
-from torch_common import dopri5_flow, read_transitions, repo_path
+from torch_common import dopri5_flow, load_mlp, read_transitions, repo_path
 
 DATA = "../shared/data/pybullet_pushing/collected_data.csv"
 

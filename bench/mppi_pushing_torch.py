@@ -27,32 +27,12 @@ import sys
 
 import torch
 
-from torch_common import describe_torch, rk4_38_flow, time_it, two_core_reference, write_comparison_csv
+from torch_common import (describe_torch, load_mlp, rk4_38_flow, time_it, two_core_reference,
+                          write_comparison_csv)
 
 K = 1000
 START = (0.4, 0.0, -0.2 * math.pi)
 GOAL = (0.8, -0.1, 0.0)
-
-
-def load_mlp(path, dtype):
-    """A torch MLP (ReLU) in `dtype` with the flat parameters of a diffdyn model file:
-    theta = [vec(W_0), b_0, vec(W_1), b_1, ...], each W_l column-major (out x in)."""
-    spec = json.load(open(path))
-    sizes = spec["architecture"]["mlp"]["sizes"]
-    theta = torch.tensor(spec["parameters"]["values"], dtype=torch.float64).to(dtype)
-    layers, offset = [], 0
-    for n_in, n_out in zip(sizes, sizes[1:]):
-        linear = torch.nn.Linear(n_in, n_out).to(dtype)
-        w = theta[offset:offset + n_in * n_out].reshape(n_in, n_out).t()
-        offset += n_in * n_out
-        b = theta[offset:offset + n_out]
-        offset += n_out
-        with torch.no_grad():
-            linear.weight.copy_(w)
-            linear.bias.copy_(b)
-        layers += [linear, torch.nn.ReLU()]
-    assert offset == theta.numel()
-    return torch.nn.Sequential(*layers[:-1]), spec
 
 
 class AbsNode(torch.nn.Module):

@@ -6,13 +6,13 @@ PyTorch, float64 and float32: z0 = [x, u] (6), dz/dt = MLP(z) (6-100-100-6, ReLU
 Kutta's 3/8-rule RK4 over 9 equal steps on [0, 1] written out in torch (what
 torchdiffeq's "rk4" does, without its bookkeeping), autograd back through the
 solver; and in float64 the same with adaptive dopri5 (tolerance 1e-8, first trial
-step 1/9, one step size per batch; torch_common.dopri5_flow), SE(2) pose loss, Adam lr 1e-3, 1000 transitions of the shared data in
-shuffled batches of 500. Runs in both two-core configurations (torch 2 threads with
-OpenBLAS 1, torch 1 with OpenBLAS 2), each in its own process, and keeps the faster
-per workload. If the C++ results of the same run are next to --out
-(pushing_epoch.json), prints ours (the default chunk of 250, best thread count)
-over PyTorch's best, and for rk4 ours in GFLOP/s against the same-precision
-two-thread peak. dopri5 picks its own steps on each side (ours per chunk of 250,
+step 1/9, one step size per batch; torch_common.dopri5_flow); SE(2) pose loss, Adam
+lr 1e-3, 1000 transitions of the shared data in shuffled batches of 500. Runs in
+both two-core configurations (torch 2 threads with OpenBLAS 1, torch 1 with OpenBLAS
+2), each in its own process, and keeps the faster per workload. If the C++ results
+of the same run are next to --out (pushing_epoch.json), prints ours (the default
+chunk of 250, best thread count) over PyTorch's best, and for rk4 ours in GFLOP/s
+against the same-precision two-thread peak. dopri5 picks its own steps on each side (ours per chunk of 250,
 PyTorch per batch of 500): both step counts are printed (stderr, benchmark counters).
 
     /usr/bin/python3 bench/pushing_epoch_torch.py --out r.json
@@ -21,7 +21,6 @@ PyTorch per batch of 500): both step counts are printed (stderr, benchmark count
 import json
 import os
 import re
-
 import sys
 
 import torch
@@ -31,6 +30,8 @@ from torch_common import (describe_torch, dopri5_flow, write_comparison_csv, our
 
 TRANSITIONS = 1000
 BATCH = 500
+DOPRI5_TOLERANCE = 1e-8
+TIMED_EPOCHS = 7
 DATA = os.environ.get("DIFFDYN_PUSHING_CSV", "../shared/data/pybullet_pushing/collected_data.csv")
 
 
@@ -49,7 +50,7 @@ class AbsNode(torch.nn.Module):
         z = torch.cat([x, u], dim=1)
         if self.method == "rk4":
             return rk4_38_flow(self.net, z, self.steps)[:, :3]
-        z, accepted, rejected = dopri5_flow(self.net, z, 1.0 / (self.steps - 1), 1e-8)
+        z, accepted, rejected = dopri5_flow(self.net, z, 1.0 / (self.steps - 1), DOPRI5_TOLERANCE)
         self.accepted += accepted
         self.rejected += rejected
         return z[:, :3]
@@ -79,9 +80,10 @@ def measure(torch_threads):
         model = AbsNode(dtype, method=method)
         opt = torch.optim.Adam(model.parameters(), lr=1e-3)
         gen = torch.Generator().manual_seed(2)
-        result[f"{name}/epoch_abs_node_{method}"] = time_it(lambda: epoch(model, opt, x, u, y, gen), 7)[0]
+        result[f"{name}/epoch_abs_node_{method}"] = time_it(lambda: epoch(model, opt, x, u, y, gen),
+                                                            TIMED_EPOCHS)[0]
         if method == "dopri5":
-            epochs = 8  # the warm-up and 7 timed
+            epochs = TIMED_EPOCHS + 1  # time_it's warm-up too
             print(f"  {name} dopri5: {model.accepted / epochs:.1f} accepted and {model.rejected / epochs:.1f} "
                   f"rejected steps per epoch (2 batches)", file=sys.stderr)
     return result
@@ -128,7 +130,8 @@ def main():
                 line += f" = {100 * rate / peak:.0f}% of the two-thread peak {peak:.1f} GFLOP/s"
             entry.update({"ours_gflops": rate, "peak_gflops": peak})
         else:
-            line += f" (ours {run.get('steps', 0):.0f} steps over 4 chunks, {run.get('rejected', 0):.0f} rejected)"
+            line += (f" (ours {run.get('steps', 0):.0f} steps over the epoch's chunks, "
+                     f"{run.get('rejected', 0):.0f} rejected)")
             entry.update({"ours_steps": run.get("steps"), "ours_rejected": run.get("rejected")})
         print(line)
         summary[f"{precision}/{method}"] = entry

@@ -37,6 +37,27 @@ def rk4_38_flow(f, z, steps):
     return z
 
 
+def load_mlp(path, dtype):
+    """A torch MLP (ReLU) in `dtype` with the flat parameters of a diffdyn model file:
+    theta = [vec(W_0), b_0, vec(W_1), b_1, ...], each W_l column-major (out x in)."""
+    spec = json.load(open(path))
+    sizes = spec["architecture"]["mlp"]["sizes"]
+    theta = torch.tensor(spec["parameters"]["values"], dtype=torch.float64).to(dtype)
+    layers, offset = [], 0
+    for n_in, n_out in zip(sizes, sizes[1:]):
+        linear = torch.nn.Linear(n_in, n_out).to(dtype)
+        w = theta[offset:offset + n_in * n_out].reshape(n_in, n_out).t()
+        offset += n_in * n_out
+        b = theta[offset:offset + n_out]
+        offset += n_out
+        with torch.no_grad():
+            linear.weight.copy_(w)
+            linear.bias.copy_(b)
+        layers += [linear, torch.nn.ReLU()]
+    assert offset == theta.numel()
+    return torch.nn.Sequential(*layers[:-1]), spec
+
+
 # Dormand & Prince (1980) 5(4) pair: stage rows a, 5th-order weights b (= the last
 # row of a, FSAL) and the 4th-order embedded weights b_hat.
 DOPRI5_A = [[],
@@ -46,6 +67,7 @@ DOPRI5_A = [[],
             [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729],
             [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656],
             [35 / 384, 0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84]]
+DOPRI5_B = DOPRI5_A[6]
 DOPRI5_B_HAT = [5179 / 57600, 0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40]
 
 
@@ -65,9 +87,9 @@ def dopri5_flow(f, z, first_step, tol):
         k = [k_first]
         for row in DOPRI5_A[1:]:
             k.append(f(z + h * sum(a * ki for a, ki in zip(row, k) if a != 0)))
-        z_new = z + h * sum(b * ki for b, ki in zip(DOPRI5_A[6], k) if b != 0)
+        z_new = z + h * sum(b * ki for b, ki in zip(DOPRI5_B, k) if b != 0)
         with torch.no_grad():
-            err = h * sum((b - bh) * ki for b, bh, ki in zip(DOPRI5_A[6] + [0.0], DOPRI5_B_HAT, k))
+            err = h * sum((b - bh) * ki for b, bh, ki in zip(DOPRI5_B + [0.0], DOPRI5_B_HAT, k))
             scale = tol + tol * torch.maximum(z.abs(), z_new.abs())
             ratio = (err / scale).double().square().mean().sqrt().item()
         factor = 10.0 if ratio == 0 else min(10.0, max(0.2, 0.9 * ratio ** -0.2))
