@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -220,6 +221,44 @@ TEST(Mlp, EvaluateIsIndependentOfBatchChunksAndThreads) {
     Eigen::MatrixXd tail(6, 7);
     net.Evaluate(X.rightCols(7), tail, &other);
     EXPECT_TRUE(tail == reference.rightCols(7)) << "a batch of the last 7 samples";
+  }
+}
+
+// With the layer kernel a block of samples skips the ReLU units that are zero for
+// all of them, so which samples share a block changes which zero terms are summed:
+// each sample's value must not depend on it. Two interleaved clusters, the same
+// batch shuffled, identical samples and a NaN sample, against each sample alone.
+TEST(Mlp, EvaluateIsIndependentOfSampleOrder) {
+  Rng rng(31);
+  MlpArchitecture arch{{6, 100, 100, 6}, {Activation::Relu(), Activation::Relu()}};
+  const Mlp<double> net(arch, RandomVector(arch.num_parameters(), 0.2, rng));
+  const int batch = 250;
+  Eigen::MatrixXd X = RandomMatrix(6, batch, 0.05, rng);
+  for (int s = 1; s < batch; s += 2) X.col(s).array() += 2.0;  // clusters at 0 and 2
+  MlpWorkspace ws(arch, batch, 250, false);
+  Eigen::MatrixXd Y(6, batch);
+  net.Evaluate(X, Y, &ws, 1);
+  std::vector<int> perm(batch);
+  for (int s = 0; s < batch; ++s) perm[s] = (s * 97) % batch;  // 97 is prime to 250
+  Eigen::MatrixXd Xp(6, batch), Yp(6, batch);
+  for (int s = 0; s < batch; ++s) Xp.col(s) = X.col(perm[s]);
+  net.Evaluate(Xp, Yp, &ws, 2);
+  MlpWorkspace single(arch, 1, 1, false);
+  for (int s = 0; s < batch; ++s) {
+    Eigen::MatrixXd y(6, 1);
+    net.Evaluate(X.col(s), y, &single);
+    EXPECT_TRUE(Y.col(s) == y.col(0)) << "sample " << s;
+    EXPECT_TRUE(Yp.col(s) == Y.col(perm[s])) << "shuffled sample " << s;
+  }
+  Eigen::MatrixXd same = X.col(0).replicate(1, batch);
+  net.Evaluate(same, Y, &ws, 1);
+  EXPECT_TRUE(Y == Y.col(0).replicate(1, batch));
+  X(3, 17) = std::numeric_limits<double>::quiet_NaN();
+  net.Evaluate(X, Y, &ws, 1);
+  for (int s : {0, 16, 18, 249}) {
+    Eigen::MatrixXd y(6, 1);
+    net.Evaluate(X.col(s), y, &single);
+    EXPECT_TRUE(Y.col(s) == y.col(0)) << "sample " << s << " beside a NaN";
   }
 }
 
