@@ -1,0 +1,30 @@
+"""diffdyn's batched dopri5 against the PyTorch reference's (bench/torch_common.dopri5_flow,
+the same error control written in torch) on the same weights: an abs-NODE trained one
+epoch with --solver dopri5 on the pushing data, its predictions of the first 1, 50 and
+200 transitions. The same accepted steps leave rounding only; another step sequence
+would differ near the tolerance, 1e-8. Skipped where torch is not installed."""
+
+import os
+import sys
+
+import pytest
+
+pytest.importorskip("torch")
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "bench"))
+import dopri5_reference_check  # noqa: E402
+
+from conftest import run_cli  # noqa: E402
+
+
+def test_dopri5_takes_the_steps_of_the_torch_reference(tmp_path):
+    data = os.path.join(os.environ.get("DIFFDYN_SHARED_DATA", "../shared/data"), "pybullet_pushing",
+                        "collected_data.csv")
+    model = str(tmp_path / "dopri5.json")
+    run_cli("train", "--data", data, "--model", "abs-node", "--solver", "dopri5", "--epochs", "1",
+            "--quiet", "--out", model)
+    rows = dopri5_reference_check.compare(model, [1, 50, 200])
+    for n, accepted, rejected, diff in rows:
+        assert accepted >= 1, f"{n} samples: no accepted step"
+        assert diff <= dopri5_reference_check.TOLERANCE, \
+            f"{n} samples: diffdyn and PyTorch differ by {diff:.3g} ({accepted} + {rejected} steps)"
