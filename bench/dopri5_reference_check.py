@@ -23,18 +23,25 @@ from torch_common import dopri5_flow, load_mlp, read_transitions, repo_path
 DATA = "../shared/data/pybullet_pushing/collected_data.csv"
 # Largest difference taken as rounding: the solver tolerance is 1e-8.
 TOLERANCE = 1e-11
+# Transition counts compared: one sample, then batches of 50 and 200.
+SAMPLES = [1, 50, 200]
 
 
-def compare(path, samples):
+def pushing_data():
+    """The pushing data's path, from bench/ as repo_path sees it."""
+    return os.path.join(os.path.dirname(os.path.abspath(__file__)), repo_path(DATA))
+
+
+def compare(path, samples=SAMPLES, data=None):
     """(n, PyTorch's accepted steps, rejected steps, max |diffdyn - PyTorch|) for the first
-    n pushing transitions, n in `samples`, predicted by the dopri5 model file `path`."""
+    n transitions of `data` (default: the pushing data), n in `samples`, predicted by the
+    dopri5 model file `path`."""
     net, spec = load_mlp(path, torch.float64)
     arch = spec["architecture"]
     if arch.get("solver") != "dopri5":
         raise SystemExit(f"error: {path}: solver is {arch.get('solver')}, not dopri5")
     model = diffdyn.load_model(path)
-    x, u, _ = read_transitions(os.path.join(os.path.dirname(os.path.abspath(__file__)), repo_path(DATA)),
-                               max(samples))
+    x, u, _ = read_transitions(data or pushing_data(), max(samples))
     rows = []
     for n in samples:
         z, accepted, rejected = dopri5_flow(net, torch.cat([x[:n], u[:n]], dim=1), 1.0 / (arch["steps"] - 1),
@@ -47,7 +54,7 @@ def compare(path, samples):
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("model", help="an abs-NODE model file with solver dopri5")
-    parser.add_argument("--samples", type=int, nargs="+", default=[1, 50, 200])
+    parser.add_argument("--samples", type=int, nargs="+", default=SAMPLES)
     args = parser.parse_args()
     worst = 0.0
     for n, accepted, rejected, diff in compare(args.model, args.samples):

@@ -18,13 +18,11 @@ from conftest import run_cli  # noqa: E402
 
 
 def test_dopri5_takes_the_steps_of_the_torch_reference(tmp_path):
-    data = os.path.join(os.environ.get("DIFFDYN_SHARED_DATA", "../shared/data"), "pybullet_pushing",
-                        "collected_data.csv")
+    data = dopri5_reference_check.pushing_data()
     model = str(tmp_path / "dopri5.json")
     run_cli("train", "--data", data, "--model", "abs-node", "--solver", "dopri5", "--epochs", "1",
             "--quiet", "--out", model)
-    rows = dopri5_reference_check.compare(model, [1, 50, 200])
-    for n, accepted, rejected, diff in rows:
+    for n, accepted, rejected, diff in dopri5_reference_check.compare(model, data=data):
         assert accepted >= 1, f"{n} samples: no accepted step"
         assert diff <= dopri5_reference_check.TOLERANCE, \
             f"{n} samples: diffdyn and PyTorch differ by {diff:.3g} ({accepted} + {rejected} steps)"
