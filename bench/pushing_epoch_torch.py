@@ -5,8 +5,8 @@ One training epoch of the absolute NeuralODE of the NeuralODE-Panda paper in pla
 PyTorch, float64 and float32: z0 = [x, u] (6), dz/dt = MLP(z) (6-100-100-6, ReLU),
 Kutta's 3/8-rule RK4 over 9 equal steps on [0, 1] written out in torch (what
 torchdiffeq's "rk4" does, without its bookkeeping), autograd back through the
-solver; and in float64 the same with adaptive dopri5 (tolerance 1e-8, first trial
-step 1/9, one step size per batch; torch_common.dopri5_flow); SE(2) pose loss, Adam
+solver; and in both precisions the same with adaptive dopri5 (tolerance 1e-8, first
+trial step 1/9, one step size per batch; torch_common.dopri5_flow); SE(2) pose loss, Adam
 lr 1e-3, 1000 transitions of the shared data in shuffled batches of 500. Runs in
 both two-core configurations (torch 2 threads with OpenBLAS 1, torch 1 with OpenBLAS
 2), each in its own process, and keeps the faster per workload. If the C++ results
@@ -74,7 +74,7 @@ def measure(torch_threads):
     data = read_transitions(path, TRANSITIONS)
     result = {}
     for name, dtype, method in (("float64", torch.float64, "rk4"), ("float32", torch.float32, "rk4"),
-                                ("float64", torch.float64, "dopri5")):
+                                ("float64", torch.float64, "dopri5"), ("float32", torch.float32, "dopri5")):
         x, u, y = (v.to(dtype) for v in data)
         torch.manual_seed(1)
         model = AbsNode(dtype, method=method)
@@ -92,7 +92,8 @@ def measure(torch_threads):
 def workload_of(name):
     """(precision, method) of our epoch runs at the default chunk (250); None for the others."""
     for pattern, key in ((r"BM_EpochAbsNodeRk4/", ("float64", "rk4")), (r"BM_EpochAbsNodeRk4F32/", ("float32", "rk4")),
-                         (r"BM_EpochAbsNodeDopri5/", ("float64", "dopri5"))):
+                         (r"BM_EpochAbsNodeDopri5/", ("float64", "dopri5")),
+                         (r"BM_EpochAbsNodeDopri5F32/", ("float32", "dopri5"))):
         if re.match(pattern + r"threads:\d+/chunk:250/", name):
             return key
     return None
