@@ -123,10 +123,10 @@ BENCHMARK(BM_EpochAbsNodeDopri5)
     ->Unit(benchmark::kMillisecond)
     ->MinTime(2.0);
 
-// dopri5 in float32 at the same tolerance (1e-8 absolute and relative, below the
-// float's resolution of 6e-8: the error estimate, a weighted sum of the stages, is
-// still far from rounding while the field is small, as at the initial weights here;
-// the step counters show what each side chose).
+// dopri5 in float32 at the same tolerance, 1e-8 absolute and relative (below the
+// float's resolution, 6e-8: the error control then also sees rounding; the counters
+// "steps" (accepted) and "rejected" show what it chose, e.g. 48 + 3 per epoch against
+// 42 + 0 in float64 on 2026-12-02).
 void BM_EpochAbsNodeDopri5F32(benchmark::State& state) {
   RunEpochs(state, Method::kDopri5, Precision::kF32);
 }

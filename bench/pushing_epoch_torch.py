@@ -30,6 +30,7 @@ from torch_common import (describe_torch, dopri5_flow, write_comparison_csv, our
 
 TRANSITIONS = 1000
 BATCH = 500
+CHUNK = 250  # our samples per thread task in the runs compared (workload_of)
 DOPRI5_TOLERANCE = 1e-8
 TIMED_EPOCHS = 7
 DATA = os.environ.get("DIFFDYN_PUSHING_CSV", "../shared/data/pybullet_pushing/collected_data.csv")
@@ -84,8 +85,9 @@ def measure(torch_threads):
                                                             TIMED_EPOCHS)[0]
         if method == "dopri5":
             epochs = TIMED_EPOCHS + 1  # time_it's warm-up too
+            steps = (model.accepted + model.rejected) / epochs
             print(f"  {name} dopri5: {model.accepted / epochs:.1f} accepted and {model.rejected / epochs:.1f} "
-                  f"rejected steps per epoch (2 batches)", file=sys.stderr)
+                  f"rejected steps per epoch (batches of {BATCH}: {steps * BATCH:.0f} sample-steps)", file=sys.stderr)
     return result
 
 
@@ -94,7 +96,7 @@ def workload_of(name):
     for pattern, key in ((r"BM_EpochAbsNodeRk4/", ("float64", "rk4")), (r"BM_EpochAbsNodeRk4F32/", ("float32", "rk4")),
                          (r"BM_EpochAbsNodeDopri5/", ("float64", "dopri5")),
                          (r"BM_EpochAbsNodeDopri5F32/", ("float32", "dopri5"))):
-        if re.match(pattern + r"threads:\d+/chunk:250/", name):
+        if re.match(pattern + rf"threads:\d+/chunk:{CHUNK}/", name):
             return key
     return None
 
@@ -131,8 +133,9 @@ def main():
                 line += f" = {100 * rate / peak:.0f}% of the two-thread peak {peak:.1f} GFLOP/s"
             entry.update({"ours_gflops": rate, "peak_gflops": peak})
         else:
-            line += (f" (ours {run.get('steps', 0):.0f} steps over the epoch's chunks, "
-                     f"{run.get('rejected', 0):.0f} rejected)")
+            tried = run.get("steps", 0) + run.get("rejected", 0)
+            line += (f" (ours {run.get('steps', 0):.0f} accepted and {run.get('rejected', 0):.0f} rejected steps "
+                     f"over the epoch's chunks of {CHUNK}: {tried * CHUNK:.0f} sample-steps)")
             entry.update({"ours_steps": run.get("steps"), "ours_rejected": run.get("rejected")})
         print(line)
         summary[f"{precision}/{method}"] = entry
