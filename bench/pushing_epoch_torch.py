@@ -13,7 +13,9 @@ both two-core configurations (torch 2 threads with OpenBLAS 1, torch 1 with Open
 of the same run are next to --out (pushing_epoch.json), prints ours (the default
 chunk of 250, best thread count) over PyTorch's best, and for rk4 ours in GFLOP/s
 against the same-precision two-thread peak. dopri5 picks its own steps on each side (ours per chunk of 250,
-PyTorch per batch of 500): both step counts are printed (stderr, benchmark counters).
+PyTorch per batch of 500), and each side's model (its own initial weights, trained
+for its own number of epochs) asks for its own count: both are printed (stderr,
+benchmark counters), and the dopri5 ratio also per step of one sample.
 
     /usr/bin/python3 bench/pushing_epoch_torch.py --out r.json
     DIFFDYN_PUSHING_CSV=path overrides the data file.
@@ -86,6 +88,9 @@ def measure(torch_threads):
         if method == "dopri5":
             epochs = TIMED_EPOCHS + 1  # time_it's warm-up too
             steps = (model.accepted + model.rejected) / epochs
+            # dopri5's work is its steps: seconds per step of one sample, for a ratio
+            # that does not depend on how many steps each side's model asked for.
+            result[f"{name}/sample_step_abs_node_dopri5"] = result[f"{name}/epoch_abs_node_dopri5"] / (steps * BATCH)
             print(f"  {name} dopri5: {model.accepted / epochs:.1f} accepted and {model.rejected / epochs:.1f} "
                   f"rejected steps per epoch (batches of {BATCH}: {steps * BATCH:.0f} sample-steps)", file=sys.stderr)
     return result
@@ -136,7 +141,13 @@ def main():
             tried = run.get("steps", 0) + run.get("rejected", 0)
             line += (f" (ours {run.get('steps', 0):.0f} accepted and {run.get('rejected', 0):.0f} rejected steps "
                      f"over the epoch's chunks of {CHUNK}: {tried * CHUNK:.0f} sample-steps)")
-            entry.update({"ours_steps": run.get("steps"), "ours_rejected": run.get("rejected")})
+            per_step = seconds / (tried * CHUNK)
+            torch_per_step = best[f"{precision}/sample_step_abs_node_dopri5"]["seconds"]
+            line += (f"; per sample-step ours {per_step * 1e6:.2f} us, PyTorch {torch_per_step * 1e6:.2f} us, "
+                     f"ours / PyTorch = {per_step / torch_per_step:.2f}x")
+            entry.update({"ours_steps": run.get("steps"), "ours_rejected": run.get("rejected"),
+                          "ours_sample_step_seconds": per_step, "torch_sample_step_seconds": torch_per_step,
+                          "sample_step_ours_over_torch": per_step / torch_per_step})
         print(line)
         summary[f"{precision}/{method}"] = entry
     with open(args.out, "w") as f:
