@@ -31,11 +31,20 @@ void TaskHjb::set_rho(double rho) {
 }
 
 void TaskHjb::Affine(const Eigen::VectorXd& x, Eigen::VectorXd* a, Eigen::MatrixXd* b) const {
+  AffineScratch scratch;
+  Affine(x, &scratch, a, b);
+}
+
+void TaskHjb::Affine(const Eigen::Ref<const Eigen::VectorXd>& x, AffineScratch* s, Eigen::VectorXd* a,
+                     Eigen::MatrixXd* b) const {
   // One pass at u = 0 with the m actions seeded: values a(x), derivatives B(x) (exact: f is affine in u).
   const int n = task_.state_size(), m = task_.action_size();
-  VectorX<DiagJet> uj = VectorX<DiagJet>::Zero(m);
-  for (int j = 0; j < m; ++j) uj[j].v[j] = 1.0;
-  const VectorX<DiagJet> dxdt = model_->Dynamics(params_, actuated_, damping_, x.cast<DiagJet>(), uj);
+  s->xj = x.cast<DiagJet>();
+  if (s->uj.size() != m) {
+    s->uj = VectorX<DiagJet>::Zero(m);
+    for (int j = 0; j < m; ++j) s->uj[j].v[j] = 1.0;
+  }
+  const VectorX<DiagJet> dxdt = model_->Dynamics(params_, actuated_, damping_, s->xj, s->uj);
   a->resize(n);
   b->resize(n, m);
   for (int i = 0; i < n; ++i) {
@@ -58,16 +67,20 @@ void TaskHjb::Evaluate(const Eigen::MatrixXd& x, const Eigen::VectorXd& v, const
   f_p->resize(x.rows(), batch);
   *f_v = Eigen::VectorXd::Constant(batch, rho_);
   // Each state is independent: chunks of a size fixed here, so any thread count gives the same bits.
+  // Per chunk the buffers are sized once; per state only the plant's Dynamics and the
+  // policy's vector are allocated.
   constexpr int kStatesPerChunk = 64;
   ParallelForChunks(batch, kStatesPerChunk, threads, [&](int, int begin, int end) {
-    Eigen::VectorXd a;
+    AffineScratch scratch;
+    Eigen::VectorXd a, w;
     Eigen::MatrixXd b;
     for (int i = begin; i < end; ++i) {
-      Affine(x.col(i), &a, &b);
-      const Eigen::VectorXd w = -b.transpose() * p.col(i);
+      Affine(x.col(i), &scratch, &a, &b);
+      w.noalias() = -b.transpose() * p.col(i);
       const Eigen::VectorXd u = task_.action_cost.ConjugateGradient(w);
       (*f)[i] = rho_ * v[i] - task_.StateCost(x.col(i)) - p.col(i).dot(a) + task_.action_cost.Conjugate(w);
-      f_p->col(i) = -(a + b * u);
+      f_p->col(i).noalias() = -a;
+      f_p->col(i).noalias() -= b * u;
     }
   });
 }

@@ -80,6 +80,14 @@ class TaskHjb final : public FirstOrderEquation {
   Eigen::VectorXd Policy(const Eigen::VectorXd& x, const Eigen::VectorXd& p) const;
 
  private:
+  // The Jet copies of one state and of the seeded zero action, kept across the states
+  // of a chunk.
+  struct AffineScratch {
+    VectorX<DiagJet> xj, uj;
+  };
+  void Affine(const Eigen::Ref<const Eigen::VectorXd>& x, AffineScratch* s, Eigen::VectorXd* a,
+              Eigen::MatrixXd* b) const;
+
   const ControlTask& task_;
   std::shared_ptr<const AnalyticModel> model_;
   Eigen::VectorXd params_, damping_;
