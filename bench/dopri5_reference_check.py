@@ -45,6 +45,12 @@ def pushing_data():
     return os.path.join(os.path.dirname(os.path.abspath(__file__)), repo_path(DATA))
 
 
+def precision_of(path):
+    """The precision a diffdyn model file records ("f64" or "f32")."""
+    with open(path) as f:
+        return json.load(f).get("precision", "f64")
+
+
 def stiffened(path, out, gain=F32_GAIN, tolerance=F32_SOLVER_TOLERANCE):
     """Writes to `out` the model file `path` with its last layer (weights and bias) times
     `gain`, so the field is `gain` times stronger, and the solver tolerance `tolerance`."""
@@ -63,8 +69,7 @@ def compare(path, samples=SAMPLES, data=None):
     """(n, PyTorch's accepted steps, rejected steps, max |diffdyn - PyTorch|) for the first
     n transitions of `data` (default: the pushing data), n in `samples`, predicted by the
     dopri5 model file `path`, both in the file's precision."""
-    with open(path) as f:
-        dtype = torch.float32 if json.load(f).get("precision") == "f32" else torch.float64
+    dtype = torch.float32 if precision_of(path) == "f32" else torch.float64
     net, spec = load_mlp(path, dtype)
     arch = spec["architecture"]
     if arch.get("solver") != "dopri5":
@@ -85,8 +90,7 @@ def main():
     parser.add_argument("model", help="an abs-NODE model file with solver dopri5")
     parser.add_argument("--samples", type=int, nargs="+", default=SAMPLES)
     args = parser.parse_args()
-    with open(args.model) as f:
-        precision = json.load(f).get("precision", "f64")
+    precision = precision_of(args.model)
     path = args.model
     if precision == "f32":
         path = os.path.join(tempfile.mkdtemp(), "stiffened.json")

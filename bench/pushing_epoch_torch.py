@@ -138,14 +138,15 @@ def main():
                 line += f" = {100 * rate / peak:.0f}% of the two-thread peak {peak:.1f} GFLOP/s"
             entry.update({"ours_gflops": rate, "peak_gflops": peak})
         else:
-            tried = run.get("steps", 0) + run.get("rejected", 0)
-            line += (f" (ours {run.get('steps', 0):.0f} accepted and {run.get('rejected', 0):.0f} rejected steps "
+            accepted, rejected = run.get("steps", 0), run.get("rejected", 0)
+            tried = accepted + rejected
+            line += (f" (ours {accepted:.0f} accepted and {rejected:.0f} rejected steps "
                      f"over the epoch's chunks of {CHUNK}: {tried * CHUNK:.0f} sample-steps)")
             per_step = seconds / (tried * CHUNK)
             torch_per_step = best[f"{precision}/sample_step_abs_node_dopri5"]["seconds"]
             line += (f"; per sample-step ours {per_step * 1e6:.2f} us, PyTorch {torch_per_step * 1e6:.2f} us, "
                      f"ours / PyTorch = {per_step / torch_per_step:.2f}x")
-            entry.update({"ours_steps": run.get("steps"), "ours_rejected": run.get("rejected"),
+            entry.update({"ours_steps": accepted, "ours_rejected": rejected,
                           "ours_sample_step_seconds": per_step, "torch_sample_step_seconds": torch_per_step,
                           "sample_step_ours_over_torch": per_step / torch_per_step})
         print(line)
