@@ -2,7 +2,9 @@
 // report a fraction of it: C = A B at 2048^3, timed two ways, the best of which is the
 // peak: Eigen with the columns of C split over two threads, and OpenBLAS's cblas_dgemm
 // (cblas_sgemm for float) on two threads (loaded with dlopen; the benchmark is skipped
-// when it is absent).
+// when it is absent). The OpenBLAS rows are labelled with the kernel set OpenBLAS chose
+// for this CPU (`openblas_get_corename`, e.g. "Haswell" for AVX2 kernels, "SkylakeX"
+// for AVX-512 ones; OPENBLAS_CORETYPE overrides its choice).
 //
 //   void BM_PeakDgemm2Threads(benchmark::State& s) { diffdyn::bench::PeakGemm2Threads<double>(s); }
 //   void BM_PeakSgemmOpenBlas2Threads(benchmark::State& s) {
@@ -13,6 +15,7 @@
 #include <benchmark/benchmark.h>
 #include <dlfcn.h>
 
+#include <string>
 #include <type_traits>
 
 #include <Eigen/Core>
@@ -46,6 +49,7 @@ void PeakGemm2Threads(benchmark::State& state, int n = 2048) {
 
 /// Times C = A B (n x n of S) with OpenBLAS's cblas_dgemm or cblas_sgemm on two
 /// threads; skipped (with an error message) when libopenblas.so.0 cannot be loaded.
+/// The row's label names OpenBLAS's kernel set ("OpenBLAS core Haswell").
 template <typename S>
 void PeakGemmOpenBlas2Threads(benchmark::State& state, int n = 2048) {
   using Gemm = void (*)(int, int, int, int, int, int, S, const S*, int, const S*, int, S, S*, int);
@@ -63,6 +67,10 @@ void PeakGemmOpenBlas2Threads(benchmark::State& state, int n = 2048) {
     return;
   }
   set_threads(2);
+  using CoreName = const char* (*)();
+  if (auto core_name = reinterpret_cast<CoreName>(dlsym(lib, "openblas_get_corename"))) {
+    state.SetLabel(std::string("OpenBLAS core ") + core_name());
+  }
   const Matrix a = Matrix::Constant(n, n, S(0.5));
   const Matrix b = Matrix::Constant(n, n, S(0.25));
   Matrix c(n, n);

@@ -1,6 +1,7 @@
 """Helpers shared by the PyTorch reference benchmarks (bench/<name>_torch.py)."""
 
 import csv
+import ctypes
 import json
 import math
 import os
@@ -22,6 +23,18 @@ def blas_in_use():
             if "blas" in path or "mkl" in path or "atlas" in path:
                 libs.add(os.path.realpath(path))
     return sorted(libs)
+
+
+def openblas_core():
+    """The kernel set the OpenBLAS mapped into this process chose for this CPU
+    (openblas_get_corename: "Haswell" is AVX2, "SkylakeX" AVX-512; OPENBLAS_CORETYPE
+    overrides it), or "" when no OpenBLAS is mapped."""
+    for path in blas_in_use():
+        if "openblas" in os.path.basename(path):
+            lib = ctypes.CDLL(path)
+            lib.openblas_get_corename.restype = ctypes.c_char_p
+            return lib.openblas_get_corename().decode()
+    return ""
 
 
 def rk4_38_flow(f, z, steps):
@@ -183,7 +196,8 @@ def describe_torch(torch_threads):
     """One line on stderr: torch version, its threads, OpenBLAS's and the BLAS mapped."""
     torch.set_num_threads(torch_threads)
     print(f"  torch {torch.__version__} threads {torch.get_num_threads()} OPENBLAS_NUM_THREADS "
-          f"{os.environ.get('OPENBLAS_NUM_THREADS')}; BLAS: {', '.join(blas_in_use()) or 'none found'}",
+          f"{os.environ.get('OPENBLAS_NUM_THREADS')}; BLAS: {', '.join(blas_in_use()) or 'none found'}"
+          f"; OpenBLAS core {openblas_core() or '-'}",
           file=sys.stderr)
 
 
