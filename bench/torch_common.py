@@ -25,11 +25,11 @@ def blas_in_use():
     return sorted(libs)
 
 
-def openblas_core():
-    """The kernel set the OpenBLAS mapped into this process chose for this CPU
+def openblas_core(libs):
+    """The kernel set the OpenBLAS among `libs` (blas_in_use()) chose for this CPU
     (openblas_get_corename: "Haswell" is AVX2, "SkylakeX" AVX-512; OPENBLAS_CORETYPE
     overrides it), or "" when no OpenBLAS is mapped."""
-    for path in blas_in_use():
+    for path in libs:
         if "openblas" in os.path.basename(path):
             lib = ctypes.CDLL(path)
             lib.openblas_get_corename.restype = ctypes.c_char_p
@@ -193,11 +193,13 @@ def fastest_two_core(script):
 
 
 def describe_torch(torch_threads):
-    """One line on stderr: torch version, its threads, OpenBLAS's and the BLAS mapped."""
+    """One line on stderr: torch version, its threads, OpenBLAS's, the BLAS mapped and
+    OpenBLAS's kernel set."""
     torch.set_num_threads(torch_threads)
+    libs = blas_in_use()
     print(f"  torch {torch.__version__} threads {torch.get_num_threads()} OPENBLAS_NUM_THREADS "
-          f"{os.environ.get('OPENBLAS_NUM_THREADS')}; BLAS: {', '.join(blas_in_use()) or 'none found'}"
-          f"; OpenBLAS core {openblas_core() or '-'}",
+          f"{os.environ.get('OPENBLAS_NUM_THREADS')}; BLAS: {', '.join(libs) or 'none found'}"
+          f"; OpenBLAS core {openblas_core(libs) or '-'}",
           file=sys.stderr)
 
 
