@@ -1,14 +1,17 @@
-// The thin products of a training epoch through diffdyn::Gemm against the same
+// The products of a training epoch through diffdyn::Gemm against the same
 // product as one direct BLAS call (sgemm_ / dgemm_), one thread, in float and
 // double. Shapes of a 6-100-100-6 network on a chunk of 250 samples:
 //
-//   out_fwd    C 6 x 250   = W 6 x 100   h 100 x 250     (forward of the output layer)
-//   out_grad   C 6 x 100  += abar 6 x 250 h^T 250 x 100  (its weight gradient)
-//   in_cot     C 100 x 250 = W^T 100 x 6 abar 6 x 250    (beta = 0: a cotangent)
+//   0 out_fwd    C 6 x 250    = W 6 x 100   h 100 x 250      (forward of the output layer)
+//   1 out_grad   C 6 x 100   += abar 6 x 250 h^T 250 x 100   (its weight gradient)
+//   2 in_cot     C 100 x 250  = W^T 100 x 6 abar 6 x 250     (beta = 0: a cotangent)
+//   3 mid_fwd    C 100 x 250 += W 100 x 100 h 100 x 250      (the middle layer's forward)
+//   4 mid_grad   C 100 x 100 += abar 100 x 250 h^T 250 x 100 (its weight gradient)
 //
-// Gemm runs the first two on its thin kernel (internal::ThinGemm) and the third
-// on BLAS after a fill of its own for beta = 0 (gemm.h); the direct call is the
-// BLAS path alone. Without a BLAS only the Gemm rows are built.
+// Gemm runs the first two on its thin kernel (internal::ThinGemm), the others on
+// its panel kernel on AVX-512 (internal::PanelGemm) and elsewhere on BLAS after a
+// fill of its own for beta = 0 (gemm.h); the direct call is the BLAS path alone.
+// Without a BLAS only the Gemm rows are built.
 //
 //   OPENBLAS_NUM_THREADS=1 build/bench/bench_models_gemm --benchmark_repetitions=5
 #include <benchmark/benchmark.h>
@@ -34,8 +37,12 @@ Shape ShapeOf(int which) {
       return {6, 250, 100, false, 1.0f};  // out_fwd
     case 1:
       return {6, 100, 250, true, 1.0f};  // out_grad
-    default:
+    case 2:
       return {100, 250, 6, false, 0.0f};  // in_cot
+    case 3:
+      return {100, 250, 100, false, 1.0f};  // mid_fwd
+    default:
+      return {100, 100, 250, true, 1.0f};  // mid_grad
   }
 }
 
@@ -60,8 +67,8 @@ void BM_Gemm(benchmark::State& state) {
   state.counters["GFLOP/s"] = benchmark::Counter(2.0 * s.m * s.n * s.k * 1e-9,
                                                  benchmark::Counter::kIsIterationInvariantRate);
 }
-BENCHMARK(BM_Gemm<float>)->DenseRange(0, 2)->ArgName("shape");
-BENCHMARK(BM_Gemm<double>)->DenseRange(0, 2)->ArgName("shape");
+BENCHMARK(BM_Gemm<float>)->DenseRange(0, 4)->ArgName("shape");
+BENCHMARK(BM_Gemm<double>)->DenseRange(0, 4)->ArgName("shape");
 
 #if defined(DIFFDYN_HAVE_BLAS)
 template <typename S>
@@ -85,8 +92,8 @@ void BM_Blas(benchmark::State& state) {
   state.counters["GFLOP/s"] = benchmark::Counter(2.0 * s.m * s.n * s.k * 1e-9,
                                                  benchmark::Counter::kIsIterationInvariantRate);
 }
-BENCHMARK(BM_Blas<float>)->DenseRange(0, 2)->ArgName("shape");
-BENCHMARK(BM_Blas<double>)->DenseRange(0, 2)->ArgName("shape");
+BENCHMARK(BM_Blas<float>)->DenseRange(0, 4)->ArgName("shape");
+BENCHMARK(BM_Blas<double>)->DenseRange(0, 4)->ArgName("shape");
 #endif
 
 }  // namespace

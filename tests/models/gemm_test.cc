@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <initializer_list>
 #include <limits>
 #include <vector>
 
@@ -76,19 +77,19 @@ TEST(Gemm, FloatOperandsMatchTheDoubleProductToFloatRounding) {
   }
 }
 
-// C with 1 to 17 rows and sums of 1 to 300 terms (the thin kernel runs 2 to two SIMD
-// vectors' rows and at most 256 terms where it is
-// built, BLAS or Eigen the others): both layouts of B, alpha and beta, beta = 0 over
-// NaN, strided blocks, and A as an exactly sized buffer (its last columns must not be
-// read past the end: the sanitizer build checks).
+// C with rows `ms`, columns `ns` and sums of 1 to 300 terms (the thin kernel runs 2
+// to two SIMD vectors' rows and at most 256 terms where it is built, the panel kernel
+// more rows on AVX-512, BLAS or Eigen the others): both layouts of B, alpha and beta,
+// beta = 0 over NaN, strided blocks, and A as an exactly sized buffer (its last
+// columns must not be read past the end: the sanitizer build checks).
 template <typename S>
-void CheckThinProducts() {
+void CheckProducts(std::initializer_list<int> ms, std::initializer_list<int> ns) {
   using Matrix = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
   const S nan = std::numeric_limits<S>::quiet_NaN();
-  for (int m : {1, 2, 3, 6, 8, 9, 16, 17}) {
-    for (int k : {1, 5, 100, 300}) {
+  for (int m : ms) {
+    for (int n : ns) {
+    for (int k : {1, 5, 100, 256, 300}) {
       for (bool tb : {false, true}) {
-        const int n = 13;
         std::vector<S> a_data(std::size_t(m) * k);
         Eigen::Map<Matrix> a(a_data.data(), m, k);
         a = Matrix::Random(m, k);
@@ -115,12 +116,40 @@ void CheckThinProducts() {
             << "m " << m << " k " << k << " tb " << tb;
       }
     }
+    }
   }
 }
 
 TEST(Gemm, ThinProductsMatchTheExactProductInDoubleAndFloat) {
-  CheckThinProducts<double>();
-  CheckThinProducts<float>();
+  CheckProducts<double>({1, 2, 3, 6, 8, 9, 16, 17}, {13});
+  CheckProducts<float>({1, 2, 3, 6, 8, 9, 16, 17}, {13});
+}
+
+// Rows past the thin kernel's: whole and partial row panels (16 doubles or 32 floats
+// on AVX-512) and column groups of 12, and n = 700, where op(B) of 256 or 300 terms
+// is cut into column blocks.
+TEST(Gemm, PanelProductsMatchTheExactProductInDoubleAndFloat) {
+  CheckProducts<double>({18, 24, 33, 100}, {1, 12, 25, 700});
+  CheckProducts<float>({33, 47, 64, 100}, {1, 12, 25, 700});
+}
+
+// The panel kernel also sums each entry over k in order from zero: splitting C's rows
+// and columns into other panels, groups and blocks gives the same bits.
+TEST(Gemm, PanelProductDoesNotDependOnTheSplitOfC) {
+  if (!kHavePanelGemm) GTEST_SKIP() << "the panel kernel is built for AVX-512 only";
+  const Eigen::MatrixXd a = Eigen::MatrixXd::Random(100, 256);
+  const Eigen::MatrixXd b = Eigen::MatrixXd::Random(700, 256);
+  Eigen::MatrixXd whole = Eigen::MatrixXd::Ones(100, 700), parts = whole;
+  Gemm(1.0, a, false, b, true, 1.0, whole);
+  for (int i = 0; i < 100; i += 37) {
+    const int h = std::min(37, 100 - i);
+    for (int s = 0; s < 700; s += 101) {
+      const int w = std::min(101, 700 - s);
+      Gemm(1.0, a.middleRows(i, h), false, b.middleRows(s, w), true, 1.0,
+           parts.block(i, s, h, w));
+    }
+  }
+  EXPECT_TRUE(whole == parts) << "largest gap " << (whole - parts).cwiseAbs().maxCoeff();
 }
 
 // The thin kernel sums each entry over k in order from zero, then adds it to C:

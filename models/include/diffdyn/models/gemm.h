@@ -25,6 +25,15 @@
 // OpenBLAS sums some other shapes in another order (one column goes to its gemv,
 // and its kernel's column tails), where results differ in the last bits.
 //
+// On AVX-512 builds every other product with at most kThinGemmMaxInner terms per
+// sum and A untransposed runs a kernel of its own too (internal::PanelGemm: row
+// panels of two vectors, register tiles of 12 columns, nothing packed), in the
+// same summation order. OpenBLAS 0.3.21 runs its AVX2 kernels on AVX-512 CPUs it
+// does not know (Zen 4 and 5), where the panel kernel ran the epoch's 100 x 100
+// times 100 x 250 products 1.7-1.9x faster (one Zen 5 core, 2026-12-02, double
+// and float); against OpenBLAS's AVX-512 kernels 1.2-1.3x faster in double and as
+// fast in float.
+//
 // Threads: diffdyn splits batches over its own threads in fixed chunks, so a
 // threaded BLAS inside each chunk would only oversubscribe the cores. The
 // first product therefore sets OpenBLAS (when it is the BLAS in use) to one
@@ -120,9 +129,17 @@ inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, 
     std::copy_n(a + std::ptrdiff_t(j) * lda, m, padded);
     step(j, padded);
   }
+  // Whole vectors of C stored as vectors, the rows past the last one entry by entry
+  // (the same operations per entry).
   for (int q = 0; q < G; ++q) {
     S* col = c + std::ptrdiff_t(s + q) * ldc;
-    for (int i = 0; i < m; ++i) {
+    int i = 0;
+    for (int v = 0; v < V && i + kLanes <= m; ++v, i += kLanes) {
+      const Vec t = alpha * acc[q][v];
+      VecU* out = reinterpret_cast<VecU*>(col + i);
+      *out = beta == S(0) ? t : beta * *out + t;
+    }
+    for (; i < m; ++i) {
       const S t = alpha * acc[q][i / kLanes][i % kLanes];
       col[i] = beta == S(0) ? t : beta * col[i] + t;
     }
@@ -148,8 +165,97 @@ inline void ThinGemm(int m, int n, int k, S alpha, const S* a, int lda, const S*
     ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s, n - s);
 }
 
+#if defined(__AVX512F__)
+/// Rows of a PanelGemm panel, in SIMD vectors, and columns per register tile:
+/// 2 x 12 accumulators, 2 loads of A and a broadcast of op(B) fit AVX-512's 32
+/// registers (2 x 12 ran 88-92 GFLOP/s in double on one Zen 5 core for C 100 x 250
+/// = A 100 x 100 times B 100 x 250; 3 x 8 and 2 x 14 were no faster).
+inline constexpr int kPanelVecs = 2;
+inline constexpr int kPanelCols = 12;
+/// Bytes of op(B) one column block of PanelGemm reads (the block stays in L2
+/// while every row panel of A passes over it).
+inline constexpr std::ptrdiff_t kPanelBlockBytes = 256 * 1024;
+/// Shortest sum Gemm gives PanelGemm: below it OpenBLAS was as fast or faster (C
+/// 100 x 250 of 6 terms with beta = 0: 4.9 us against 8.0 in float; 16 to 64 terms
+/// the same time; 100: 1.7-1.9x slower).
+inline constexpr int kPanelMinInner = 32;
+
+// Columns [0, n) of one row panel of m <= V vectors' rows: ThinColumns in groups
+// of kPanelCols.
+template <typename S, int V, bool kTransB>
+inline void PanelColumns(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
+                         S beta, S* c, int ldc) {
+  int s = 0;
+  for (; s + kPanelCols <= n; s += kPanelCols) {
+    ThinColumns<S, V, kPanelCols, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s,
+                                           kPanelCols);
+  }
+  if (s < n) {
+    ThinColumns<S, V, kPanelCols, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s, n - s);
+  }
+}
+
+/// C = beta C + alpha A op(B) for any m, on AVX-512: A m x k (column-major,
+/// leading dimension lda), op(B) k x n as in ThinGemm, C m x n (ldc). C is cut
+/// into column blocks whose op(B) fits kPanelBlockBytes, each block into row
+/// panels of kPanelVecs vectors (the last of one vector if that holds its rows),
+/// each panel into register tiles of kPanelCols columns (ThinColumns): A's
+/// columns and op(B)'s entries are read in place, nothing is packed. Each entry
+/// is summed over j = 0, 1, ... from zero, then alpha times the sum is added to
+/// beta C: for k <= kThinGemmMaxInner the order of OpenBLAS's kernels, and the
+/// same bits as its dgemm and sgemm (Haswell and SkylakeX kernels, 2026-12-02).
+template <typename S, bool kTransB>
+inline void PanelGemm(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
+                      S beta, S* c, int ldc) {
+  constexpr int kLanes = LayerShape<S>::kLanes;
+  constexpr int kPanelRows = kPanelVecs * kLanes;
+  const std::ptrdiff_t column_bytes = std::ptrdiff_t(k) * static_cast<std::ptrdiff_t>(sizeof(S));
+  const std::ptrdiff_t blocks = std::max<std::ptrdiff_t>(
+      1, (column_bytes * n + kPanelBlockBytes - 1) / kPanelBlockBytes);
+  const int per_block = static_cast<int>((n + blocks - 1) / blocks);
+  const int width = (per_block + kPanelCols - 1) / kPanelCols * kPanelCols;
+  for (int s0 = 0; s0 < n; s0 += width) {
+    const int cols = std::min(width, n - s0);
+    const S* bs = kTransB ? b + s0 : b + std::ptrdiff_t(s0) * ldb;
+    S* cs = c + std::ptrdiff_t(s0) * ldc;
+    for (int i0 = 0; i0 < m; i0 += kPanelRows) {
+      const int rows = std::min(kPanelRows, m - i0);
+      if (rows <= kLanes) {
+        PanelColumns<S, 1, kTransB>(rows, cols, k, alpha, a + i0, lda, bs, ldb, beta, cs + i0, ldc);
+      } else {
+        PanelColumns<S, kPanelVecs, kTransB>(rows, cols, k, alpha, a + i0, lda, bs, ldb, beta,
+                                             cs + i0, ldc);
+      }
+    }
+  }
+}
+#endif
+
 }  // namespace internal
 #endif
+
+/// Whether Gemm runs its own kernel (internal::PanelGemm) for products A op(B)
+/// with more rows than the thin kernel takes and kPanelMinInner to
+/// kThinGemmMaxInner terms per sum (AVX-512 builds): OpenBLAS picks AVX2 kernels on AVX-512 CPUs it does
+/// not know, and on AVX2 its kernels were as fast as ours.
+#if DIFFDYN_LAYER_KERNEL && defined(__AVX512F__)
+#define DIFFDYN_PANEL_GEMM 1
+#else
+#define DIFFDYN_PANEL_GEMM 0
+#endif
+inline constexpr bool kHavePanelGemm = DIFFDYN_PANEL_GEMM != 0;
+
+namespace internal {
+// Whether Gemm runs PanelGemm for a product of more rows than ThinGemm takes.
+template <typename S>
+constexpr bool PanelTakes([[maybe_unused]] Eigen::Index k) {
+#if DIFFDYN_PANEL_GEMM
+  return k >= kPanelMinInner;
+#else
+  return false;
+#endif
+}
+}  // namespace internal
 
 /// Whether Gemm calls an external BLAS (true) or Eigen's products (false).
 constexpr bool GemmUsesBlas() {
@@ -196,9 +302,10 @@ void Gemm(typename DC::Scalar alpha, const Eigen::MatrixBase<DA>& a, bool transp
     return;
   }
 #if DIFFDYN_LAYER_KERNEL
-  // C of 2 to two vectors' rows: the thin kernel (one row: BLAS was faster).
-  if (!transpose_a && m >= 2 && m <= internal::kThinGemmMaxRows<S> &&
-      k <= internal::kThinGemmMaxInner) {
+  // C of 2 to two vectors' rows: the thin kernel (one row: BLAS was faster); more
+  // rows: the panel kernel where it is built.
+  if (!transpose_a && m >= 2 && k <= internal::kThinGemmMaxInner &&
+      (m <= internal::kThinGemmMaxRows<S> || internal::PanelTakes<S>(k))) {
     const int mi = static_cast<int>(m), ni = static_cast<int>(n), ki = static_cast<int>(k);
     const int lda = static_cast<int>(std::max<Eigen::Index>(1, a.derived().outerStride()));
     const int ldb = static_cast<int>(std::max<Eigen::Index>(1, b.derived().outerStride()));
@@ -206,6 +313,14 @@ void Gemm(typename DC::Scalar alpha, const Eigen::MatrixBase<DA>& a, bool transp
     const S* pa = a.derived().data();
     const S* pb = b.derived().data();
     S* pc = c.derived().data();
+#if DIFFDYN_PANEL_GEMM
+    if (m > internal::kThinGemmMaxRows<S>) {
+      transpose_b
+          ? internal::PanelGemm<S, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc)
+          : internal::PanelGemm<S, false>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc);
+      return;
+    }
+#endif
     if (m <= internal::LayerShape<S>::kLanes) {
       transpose_b
           ? internal::ThinGemm<S, 1, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc)

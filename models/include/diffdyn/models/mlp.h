@@ -84,6 +84,14 @@ struct MlpArchitecture {
   int num_outputs() const { return sizes.back(); }
   /// Largest layer width max_l n_l.
   int max_width() const { return *std::max_element(sizes.begin(), sizes.end()); }
+  /// Largest weight matrix, max_l n_{l+1} n_l entries.
+  Eigen::Index max_weight_count() const {
+    Eigen::Index count = 0;
+    for (int l = 0; l < num_layers(); ++l) {
+      count = std::max(count, Eigen::Index(sizes[l + 1]) * sizes[l]);
+    }
+    return count;
+  }
   /// Offset of vec(W_l) in the flat parameter vector.
   Eigen::Index WeightOffset(int l) const {
     Eigen::Index offset = 0;
@@ -176,7 +184,8 @@ class BasicMlpWorkspace {
     std::vector<Matrix> u;    // U_l, n_{l+1} x n_0 cap (Jacobian mode)
     std::vector<Matrix> z;    // Z_l, n_l x n_0 cap, l >= 1 (Jacobian mode)
     Matrix abar[2], dbar, ubar[2], zbar;
-    Vector weight_t;          // W_l^T of a thin layer, kThinSide x width (reverse sweep)
+    Vector weight_t;          // W_l^T for the reverse sweep: of a thin layer (kThinSide x
+                              // width), or of any layer where Gemm has its panel kernel
     Vector grad;
     Vector block;             // feature-major blocks of kLayerBlock samples (Evaluate,
                               // and InputJacobianReverse with the layer kernel)
@@ -196,7 +205,8 @@ class BasicMlpWorkspace {
       for (int l = 0; l < layers; ++l) h[l].resize(arch.sizes[l], cap);
       for (int l = 0; l + 1 < layers; ++l) dg[l].resize(arch.sizes[l + 1], cap);
       abar[0].resize(width, cap);
-      weight_t.resize(Eigen::Index(kThinSide) * width);
+      weight_t.resize(kHavePanelGemm ? arch.max_weight_count()
+                                     : Eigen::Index(kThinSide) * width);
       abar[1].resize(width, cap);
       grad.resize(arch.num_parameters());
       if (jacobian) {
@@ -863,15 +873,18 @@ class Mlp {
 #endif
   }
 
-  // out = W_l^T abar. A thin W_l (a side of at most kThinSide) is transposed into
-  // the chunk's buffer first: BLAS runs the plain product of the copy up to 2.5x
-  // faster than the transposed one for these shapes (6 x 100 times 6 x 250).
+  // out = W_l^T abar. W_l is transposed into the chunk's buffer first where Gemm
+  // has its panel kernel (which takes A untransposed; the copy of a 100 x 100 W
+  // costs some 4 us against 55-60 us for the product of 250 samples), and
+  // elsewhere if W_l is thin (a side of at most kThinSide): BLAS runs the plain
+  // product of the copy up to 2.5x faster than the transposed one for these
+  // shapes (6 x 100 times 6 x 250).
   template <typename ABlock, typename OutBlock>
   void GemmTransposedWeight(int l, const ABlock& abar, OutBlock&& out,
                             typename Workspace::Chunk* buf) const {
     const int rows = arch_.sizes[l + 1];
     const int cols = arch_.sizes[l];
-    if (std::min(rows, cols) > Workspace::kThinSide) {
+    if (!kHavePanelGemm && std::min(rows, cols) > Workspace::kThinSide) {
       Gemm(1.0, W(l), true, abar, false, 0.0, out);
       return;
     }
