@@ -30,9 +30,10 @@
 // panels of two vectors, register tiles of 12 columns, nothing packed), in the
 // same summation order. OpenBLAS 0.3.21 runs its AVX2 kernels on AVX-512 CPUs it
 // does not know (Zen 4 and 5), where the panel kernel ran the epoch's 100 x 100
-// times 100 x 250 products 1.7-1.9x faster (one Zen 5 core, 2026-12-02, double
-// and float); against OpenBLAS's AVX-512 kernels 1.2-1.3x faster in double and as
-// fast in float.
+// times 100 x 250 products 1.45-1.7x faster (one Zen 5 core, 2026-12-02, double
+// and float); against OpenBLAS's AVX-512 kernels 1.25-1.4x faster in double and
+// 10 % slower in float, so float products stay with OpenBLAS when it runs those
+// (internal::BlasRunsAvx512Kernels).
 //
 // Threads: diffdyn splits batches over its own threads in fixed chunks, so a
 // threaded BLAS inside each chunk would only oversubscribe the cores. The
@@ -44,6 +45,7 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <cstddef>
+#include <string_view>
 #include <type_traits>
 
 #include "diffdyn/models/layer_kernel.h"
@@ -59,6 +61,7 @@ void sgemm_(const char* transa, const char* transb, const int* m, const int* n, 
             const float* beta, float* c, const int* ldc);
 // OpenBLAS only; null when another BLAS is linked.
 void openblas_set_num_threads(int num_threads) __attribute__((weak));
+char* openblas_get_corename(void) __attribute__((weak));
 }
 #endif
 
@@ -77,6 +80,26 @@ inline void UseOneBlasThread() {
 }
 }  // namespace internal
 #endif
+
+namespace internal {
+/// Whether the BLAS in use runs AVX-512 kernels: OpenBLAS's kernel set (chosen
+/// for the CPU when it loads, or by OPENBLAS_CORETYPE) is SkylakeX, Cooperlake or
+/// SapphireRapids. Read once per process; false without OpenBLAS.
+inline bool BlasRunsAvx512Kernels() {
+  static const bool avx512 = [] {
+#if defined(DIFFDYN_HAVE_BLAS)
+    if (openblas_get_corename == nullptr) return false;
+    const char* name = openblas_get_corename();
+    if (name == nullptr) return false;
+    const std::string_view core(name);
+    return core == "SkylakeX" || core == "Cooperlake" || core == "SapphireRapids";
+#else
+    return false;
+#endif
+  }();
+  return avx512;
+}
+}  // namespace internal
 
 #if DIFFDYN_LAYER_KERNEL
 namespace internal {
@@ -246,11 +269,13 @@ inline void PanelGemm(int m, int n, int k, S alpha, const S* a, int lda, const S
 inline constexpr bool kHavePanelGemm = DIFFDYN_PANEL_GEMM != 0;
 
 namespace internal {
-// Whether Gemm runs PanelGemm for a product of more rows than ThinGemm takes.
+// Whether Gemm runs PanelGemm for a product of more rows than ThinGemm takes: in
+// double always, in float unless OpenBLAS runs its AVX-512 kernels (its sgemm was
+// 10 % faster than PanelGemm there, 33 against 37 us at 100 x 100 x 250).
 template <typename S>
-constexpr bool PanelTakes([[maybe_unused]] Eigen::Index k) {
+inline bool PanelTakes([[maybe_unused]] Eigen::Index k) {
 #if DIFFDYN_PANEL_GEMM
-  return k >= kPanelMinInner;
+  return k >= kPanelMinInner && (std::is_same_v<S, double> || !BlasRunsAvx512Kernels());
 #else
   return false;
 #endif
