@@ -172,14 +172,13 @@ inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, 
 /// C = beta C + alpha A op(B) for C with few rows: A m x k (column-major,
 /// leading dimension lda), op(B) k x n with op(B)[j, s] = B[j + s ldb], or
 /// B[s + j ldb] if kTransB; C m x n (ldc); m <= V SIMD vectors of S. Columns of
-/// C in groups of 8 (one vector per column) or 6 (two), each entry summed over
-/// j = 0, 1, ... from zero, then alpha times the sum added to beta C (beta = 0
-/// overwrites C). With a pointer and leading dimension per operand, so callers
-/// need no Eigen types.
-template <typename S, int V, bool kTransB>
+/// C in groups of kGroup (by default 8 with one vector per column, 6 with two),
+/// each entry summed over j = 0, 1, ... from zero, then alpha times the sum added
+/// to beta C (beta = 0 overwrites C). With a pointer and leading dimension per
+/// operand, so callers need no Eigen types.
+template <typename S, int V, bool kTransB, int kGroup = V == 1 ? 8 : 6>
 inline void ThinGemm(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb, S beta,
                      S* c, int ldc) {
-  constexpr int kGroup = V == 1 ? 8 : 6;
   int s = 0;
   for (; s + kGroup <= n; s += kGroup) {
     ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s, kGroup);
@@ -203,26 +202,11 @@ inline constexpr std::ptrdiff_t kPanelBlockBytes = 256 * 1024;
 /// the same time; 100: 1.7-1.9x slower).
 inline constexpr int kPanelMinInner = 32;
 
-// Columns [0, n) of one row panel of m <= V vectors' rows: ThinColumns in groups
-// of kPanelCols.
-template <typename S, int V, bool kTransB>
-inline void PanelColumns(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
-                         S beta, S* c, int ldc) {
-  int s = 0;
-  for (; s + kPanelCols <= n; s += kPanelCols) {
-    ThinColumns<S, V, kPanelCols, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s,
-                                           kPanelCols);
-  }
-  if (s < n) {
-    ThinColumns<S, V, kPanelCols, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s, n - s);
-  }
-}
-
 /// C = beta C + alpha A op(B) for any m, on AVX-512: A m x k (column-major,
 /// leading dimension lda), op(B) k x n as in ThinGemm, C m x n (ldc). C is cut
 /// into column blocks whose op(B) fits kPanelBlockBytes, each block into row
 /// panels of kPanelVecs vectors (the last of one vector if that holds its rows),
-/// each panel into register tiles of kPanelCols columns (ThinColumns): A's
+/// each panel into register tiles of kPanelCols columns (ThinGemm): A's
 /// columns and op(B)'s entries are read in place, nothing is packed. Each entry
 /// is summed over j = 0, 1, ... from zero, then alpha times the sum is added to
 /// beta C: for k <= kThinGemmMaxInner the order of OpenBLAS's kernels, and the
@@ -244,10 +228,11 @@ inline void PanelGemm(int m, int n, int k, S alpha, const S* a, int lda, const S
     for (int i0 = 0; i0 < m; i0 += kPanelRows) {
       const int rows = std::min(kPanelRows, m - i0);
       if (rows <= kLanes) {
-        PanelColumns<S, 1, kTransB>(rows, cols, k, alpha, a + i0, lda, bs, ldb, beta, cs + i0, ldc);
+        ThinGemm<S, 1, kTransB, kPanelCols>(rows, cols, k, alpha, a + i0, lda, bs, ldb, beta,
+                                            cs + i0, ldc);
       } else {
-        PanelColumns<S, kPanelVecs, kTransB>(rows, cols, k, alpha, a + i0, lda, bs, ldb, beta,
-                                             cs + i0, ldc);
+        ThinGemm<S, kPanelVecs, kTransB, kPanelCols>(rows, cols, k, alpha, a + i0, lda, bs, ldb,
+                                                     beta, cs + i0, ldc);
       }
     }
   }
