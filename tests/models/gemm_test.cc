@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <initializer_list>
 #include <limits>
 #include <vector>
@@ -166,6 +167,80 @@ TEST(Gemm, ThinProductDoesNotDependOnTheColumnGrouping) {
     Gemm(1.0f, a, false, b.middleCols(s, w), false, 1.0f, parts.middleCols(s, w));
   }
   EXPECT_TRUE(whole == parts) << "largest gap " << (whole - parts).cwiseAbs().maxCoeff();
+}
+
+// Same value in x and y: equal with the same sign (so -0 against +0 differs), or
+// both NaN.
+template <typename S>
+bool SameValue(S x, S y) {
+  return (std::isnan(x) && std::isnan(y)) || (x == y && std::signbit(x) == std::signbit(y));
+}
+
+// GemmFused's stages (bias, ReLU, mask; each alone and together) give the values of
+// the product followed by one pass per stage: with and without the thin and panel
+// kernels (rows 1 to 100, 6 and 100 terms), both layouts of B, strided C and mask,
+// NaN in B and in the mask, negative zeros and zeros in the mask.
+template <typename S>
+void CheckFusedStages() {
+  using Matrix = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
+  using Vector = Eigen::Matrix<S, Eigen::Dynamic, 1>;
+  const S nan = std::numeric_limits<S>::quiet_NaN();
+  for (int m : {1, 6, 17, 33, 100}) {
+    for (int n : {1, 13, 250}) {
+      for (int k : {6, 100}) {
+        for (bool tb : {false, true}) {
+          const Matrix a = Matrix::Random(m, k);
+          Matrix big_b = Matrix::Random(k + n + 2, k + n + 2);
+          auto b = big_b.block(1, 1, tb ? n : k, tb ? k : n);
+          b(0, 0) = nan;  // one entry of C's column 0 (tb: row 0 of every column) is NaN
+          const Vector bias = Vector::Random(m);
+          Matrix big_mask = Matrix::Random(m + 2, n);
+          auto mask = big_mask.topRows(m);
+          mask(0, n - 1) = nan;
+          mask(m - 1, 0) = S(-0.0);
+          mask(m / 2, n / 2) = S(0);
+          for (int stages = 1; stages < 8; ++stages) {
+            GemmOutput<S> out;
+            if (stages & 1) out.bias = bias.data();
+            out.relu = (stages & 2) != 0;
+            if (stages & 4) {
+              out.mask = mask.data();
+              out.mask_ld = big_mask.rows();
+            }
+            Matrix expected(m, n);
+            if (out.bias) {
+              expected.colwise() = bias;
+              Gemm(S(1), a, false, b, tb, S(1), expected);
+            } else {
+              Gemm(S(1), a, false, b, tb, S(0), expected);
+            }
+            for (int j = 0; j < n; ++j) {
+              for (int i = 0; i < m; ++i) {
+                S& t = expected(i, j);
+                if (out.relu) t = std::max(t, S(0));
+                if (out.mask) t = t * (mask(i, j) > S(0) ? S(1) : S(0));
+              }
+            }
+            Matrix c_big = Matrix::Constant(m + 3, n + 1, nan);
+            c_big.bottomRows(3).setOnes();
+            GemmFused(a, false, b, tb, out, c_big.topLeftCorner(m, n));
+            int differ = 0;
+            for (int j = 0; j < n; ++j) {
+              for (int i = 0; i < m; ++i) differ += !SameValue(c_big(i, j), expected(i, j));
+            }
+            EXPECT_EQ(differ, 0) << "m " << m << " n " << n << " k " << k << " tb " << tb
+                                 << " stages " << stages;
+            EXPECT_TRUE((c_big.bottomRows(3).array() == S(1)).all());
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(GemmFused, StagesGiveTheValuesOfTheProductThenOnePassEachInDoubleAndFloat) {
+  CheckFusedStages<double>();
+  CheckFusedStages<float>();
 }
 
 }  // namespace

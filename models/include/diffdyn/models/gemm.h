@@ -35,6 +35,12 @@
 // 10 % slower in float, so float products stay with OpenBLAS when it runs those
 // (internal::BlasRunsAvx512Kernels).
 //
+// GemmFused adds a network layer's output stages to the product: a bias and ReLU
+// (the forward pass), or ReLU's derivative as a mask (the backward pass), applied
+// while the kernels' register tiles are stored rather than in passes over C:
+//
+//   diffdyn::GemmFused(W, false, h, false, diffdyn::GemmOutput<double>{b.data(), true}, a);
+//
 // Threads: diffdyn splits batches over its own threads in fixed chunks, so a
 // threaded BLAS inside each chunk would only oversubscribe the cores. The
 // first product therefore sets OpenBLAS (when it is the BLAS in use) to one
@@ -48,6 +54,7 @@
 #include <string_view>
 #include <type_traits>
 
+#include "diffdyn/models/activations.h"
 #include "diffdyn/models/layer_kernel.h"
 
 #if defined(DIFFDYN_HAVE_BLAS)
@@ -113,18 +120,83 @@ inline constexpr int kThinGemmMaxRows = 2 * LayerShape<S>::kLanes;
 /// one running sum would round differently.
 inline constexpr int kThinGemmMaxInner = 256;
 
-// Columns [s, s + G) of C = beta C + alpha A op(B) for ThinGemm, G a compile-time
+// Output stages of ThinGemm and PanelGemm: Store(t, c, i, j) writes t = alpha
+// (A op(B))(i, j) to c = &C(i, j), a vector of rows i.. or one entry; Shift(i0, j0)
+// is the stage of the block of C from (i0, j0) on; Prefetch(rows, j, g, lanes) is
+// called before the sums of columns [j, j + g).
+
+// C = beta C + t (beta = 0 overwrites C without reading it).
+template <typename S>
+struct ScaledAddStage {
+  using Vec = typename LayerVectors<S>::Vec;
+  using VecU = typename LayerVectors<S>::VecU;
+  S beta;
+  ScaledAddStage Shift(int, int) const { return *this; }
+  void Prefetch(int, int, int, int) const {}
+  void Store(Vec t, S* c, int, int) const {
+    VecU* out = reinterpret_cast<VecU*>(c);
+    *out = beta == S(0) ? t : beta * *out + t;
+  }
+  void Store(S t, S* c, int, int) const { *c = beta == S(0) ? t : beta * *c + t; }
+};
+
+// C = GemmOutput's stages applied to t: (max(t + bias, 0) if relu) [mask > 0].
+template <typename S>
+struct OutputStage {
+  using Vec = typename LayerVectors<S>::Vec;
+  using VecU = typename LayerVectors<S>::VecU;
+  using Mask = decltype(Vec{} < Vec{});  // the integer vector of a comparison
+  const S* bias;
+  bool relu;
+  const S* mask;
+  std::ptrdiff_t mask_ld;
+  OutputStage Shift(int i0, int j0) const {
+    OutputStage shifted = *this;
+    if (bias) shifted.bias += i0;
+    if (mask) shifted.mask += i0 + std::ptrdiff_t(j0) * mask_ld;
+    return shifted;
+  }
+  // Asks for the mask's rows [0, rows) of columns [j, j + g) in cache: the tile's
+  // sums take long enough for them to arrive, where its column-strided reads at
+  // the store would wait for memory.
+  void Prefetch(int rows, int j, int g, int lanes) const {
+    if (!mask) return;
+    for (int q = 0; q < g; ++q) {
+      const S* col = mask + std::ptrdiff_t(j + q) * mask_ld;
+      for (int i = 0; i < rows; i += lanes) __builtin_prefetch(col + i);
+    }
+  }
+  // max(t, 0) as std::max(t, 0) gives it (t < 0 ? +0 : t, so NaN and -0 stay), and
+  // [x > 0] as 1 or 0, both on the bits of comparison masks.
+  void Store(Vec t, S* c, int i, int j) const {
+    if (bias) t = *reinterpret_cast<const VecU*>(bias + i) + t;
+    if (relu) t = (Vec)((Mask)t & ~(t < Vec{}));
+    if (mask) {
+      const Vec h = *reinterpret_cast<const VecU*>(mask + i + std::ptrdiff_t(j) * mask_ld);
+      t = t * (Vec)((Mask)(Vec{} + S(1)) & (h > Vec{}));
+    }
+    *reinterpret_cast<VecU*>(c) = t;
+  }
+  void Store(S t, S* c, int i, int j) const {
+    if (bias) t = bias[i] + t;
+    if (relu) t = std::max(t, S(0));
+    if (mask) t = t * PositiveIndicator(mask[i + std::ptrdiff_t(j) * mask_ld]);
+    *c = t;
+  }
+};
+
+// Columns [s, s + G) of C = stage(alpha A op(B)) for ThinGemm, G a compile-time
 // count (g < G runs the kernel of g columns). Each column of C is V vectors of
 // accumulators; per k one load of A's column and one broadcast of op(B)[j, s + q]
 // per column q. A's columns are read in place while a full V-vector load stays
 // inside A (its entries past row m only reach lanes that are never stored), the
 // last few through a zero-padded copy.
-template <typename S, int V, int G, bool kTransB>
-inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, int ldb, S beta,
-                        S* c, int ldc, int s, int g) {
+template <typename S, int V, int G, bool kTransB, typename Stage>
+inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, int ldb,
+                        const Stage& stage, S* c, int ldc, int s, int g) {
   if constexpr (G > 1) {
     if (g < G)
-      return ThinColumns<S, V, G - 1, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s, g);
+      return ThinColumns<S, V, G - 1, kTransB>(m, k, alpha, a, lda, b, ldb, stage, c, ldc, s, g);
   }
   using Vec = typename LayerVectors<S>::Vec;
   using VecU = typename LayerVectors<S>::VecU;
@@ -142,6 +214,7 @@ inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, 
       for (int v = 0; v < V; ++v) acc[q][v] += bj * x[v];
     }
   };
+  stage.Prefetch(m, s, G, kLanes);
   const std::ptrdiff_t end = std::ptrdiff_t(k - 1) * lda + m;  // one past A's last entry
   int in_place = 0;
   if (end >= V * kLanes)
@@ -153,19 +226,14 @@ inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, 
     step(j, padded);
   }
   // Whole vectors of C stored as vectors, the rows past the last one entry by entry
-  // (the same operations per entry).
+  // (the same operations per entry), each through the output stage.
   for (int q = 0; q < G; ++q) {
     S* col = c + std::ptrdiff_t(s + q) * ldc;
     int i = 0;
     for (int v = 0; v < V && i + kLanes <= m; ++v, i += kLanes) {
-      const Vec t = alpha * acc[q][v];
-      VecU* out = reinterpret_cast<VecU*>(col + i);
-      *out = beta == S(0) ? t : beta * *out + t;
+      stage.Store(Vec(alpha * acc[q][v]), col + i, i, s + q);
     }
-    for (; i < m; ++i) {
-      const S t = alpha * acc[q][i / kLanes][i % kLanes];
-      col[i] = beta == S(0) ? t : beta * col[i] + t;
-    }
+    for (; i < m; ++i) stage.Store(S(alpha * acc[q][i / kLanes][i % kLanes]), col + i, i, s + q);
   }
 }
 
@@ -176,15 +244,23 @@ inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, 
 /// each entry summed over j = 0, 1, ... from zero, then alpha times the sum added
 /// to beta C (beta = 0 overwrites C). With a pointer and leading dimension per
 /// operand, so callers need no Eigen types.
+/// ThinGemmTo stores each entry through an output stage instead (ScaledAddStage is
+/// ThinGemm's beta, OutputStage a GemmOutput).
+template <typename S, int V, bool kTransB, int kGroup = V == 1 ? 8 : 6, typename Stage>
+inline void ThinGemmTo(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
+                       const Stage& stage, S* c, int ldc) {
+  int s = 0;
+  for (; s + kGroup <= n; s += kGroup) {
+    ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, b, ldb, stage, c, ldc, s, kGroup);
+  }
+  if (s < n)
+    ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, b, ldb, stage, c, ldc, s, n - s);
+}
 template <typename S, int V, bool kTransB, int kGroup = V == 1 ? 8 : 6>
 inline void ThinGemm(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb, S beta,
                      S* c, int ldc) {
-  int s = 0;
-  for (; s + kGroup <= n; s += kGroup) {
-    ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s, kGroup);
-  }
-  if (s < n)
-    ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, b, ldb, beta, c, ldc, s, n - s);
+  ThinGemmTo<S, V, kTransB, kGroup>(m, n, k, alpha, a, lda, b, ldb, ScaledAddStage<S>{beta}, c,
+                                    ldc);
 }
 
 #if defined(__AVX512F__)
@@ -202,18 +278,20 @@ inline constexpr std::ptrdiff_t kPanelBlockBytes = 256 * 1024;
 /// the same time; 100: 1.7-1.9x slower).
 inline constexpr int kPanelMinInner = 32;
 
-/// C = beta C + alpha A op(B) for any m, on AVX-512: A m x k (column-major,
-/// leading dimension lda), op(B) k x n as in ThinGemm, C m x n (ldc). C is cut
-/// into column blocks whose op(B) fits kPanelBlockBytes, each block into row
-/// panels of kPanelVecs vectors (the last of one vector if that holds its rows),
-/// each panel into register tiles of kPanelCols columns (ThinGemm): A's
-/// columns and op(B)'s entries are read in place, nothing is packed. Each entry
-/// is summed over j = 0, 1, ... from zero, then alpha times the sum is added to
-/// beta C: for k <= kThinGemmMaxInner the order of OpenBLAS's kernels, and the
-/// same bits as its dgemm and sgemm (Haswell and SkylakeX kernels, 2026-12-02).
-template <typename S, bool kTransB>
+/// C = stage(alpha A op(B)) for any m, on AVX-512: A m x k (column-major, leading
+/// dimension lda), op(B) k x n as in ThinGemm, C m x n (ldc); the stage stores each
+/// entry (ScaledAddStage: beta C + alpha A op(B); OutputStage: a GemmOutput's bias,
+/// ReLU and mask while the tile is in registers). C is cut into column blocks whose
+/// op(B) fits kPanelBlockBytes, each block into row panels of kPanelVecs vectors
+/// (the last of one vector if that holds its rows), each panel into register tiles
+/// of kPanelCols columns (ThinGemmTo): A's columns and op(B)'s entries are read in
+/// place, nothing is packed. Each entry is summed over j = 0, 1, ... from zero,
+/// then alpha times the sum goes to the stage: for k <= kThinGemmMaxInner the order
+/// of OpenBLAS's kernels, and the same bits as its dgemm and sgemm with beta C
+/// (Haswell and SkylakeX kernels, 2026-12-02).
+template <typename S, bool kTransB, typename Stage>
 inline void PanelGemm(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
-                      S beta, S* c, int ldc) {
+                      const Stage& stage, S* c, int ldc) {
   constexpr int kLanes = LayerShape<S>::kLanes;
   constexpr int kPanelRows = kPanelVecs * kLanes;
   const std::ptrdiff_t column_bytes = std::ptrdiff_t(k) * static_cast<std::ptrdiff_t>(sizeof(S));
@@ -227,12 +305,13 @@ inline void PanelGemm(int m, int n, int k, S alpha, const S* a, int lda, const S
     S* cs = c + std::ptrdiff_t(s0) * ldc;
     for (int i0 = 0; i0 < m; i0 += kPanelRows) {
       const int rows = std::min(kPanelRows, m - i0);
+      const Stage tile_stage = stage.Shift(i0, s0);
       if (rows <= kLanes) {
-        ThinGemm<S, 1, kTransB, kPanelCols>(rows, cols, k, alpha, a + i0, lda, bs, ldb, beta,
-                                            cs + i0, ldc);
+        ThinGemmTo<S, 1, kTransB, kPanelCols>(rows, cols, k, alpha, a + i0, lda, bs, ldb,
+                                              tile_stage, cs + i0, ldc);
       } else {
-        ThinGemm<S, kPanelVecs, kTransB, kPanelCols>(rows, cols, k, alpha, a + i0, lda, bs, ldb,
-                                                     beta, cs + i0, ldc);
+        ThinGemmTo<S, kPanelVecs, kTransB, kPanelCols>(rows, cols, k, alpha, a + i0, lda, bs, ldb,
+                                                       tile_stage, cs + i0, ldc);
       }
     }
   }
@@ -243,9 +322,10 @@ inline void PanelGemm(int m, int n, int k, S alpha, const S* a, int lda, const S
 #endif
 
 /// Whether Gemm runs its own kernel (internal::PanelGemm) for products A op(B)
-/// with more rows than the thin kernel takes and kPanelMinInner to
-/// kThinGemmMaxInner terms per sum (AVX-512 builds): OpenBLAS picks AVX2 kernels on AVX-512 CPUs it does
-/// not know, and on AVX2 its kernels were as fast as ours.
+/// with more rows than the thin kernel takes and up to kThinGemmMaxInner terms
+/// per sum (AVX-512 builds; the shortest sums it takes: internal::PanelTakes):
+/// OpenBLAS picks AVX2 kernels on AVX-512 CPUs it does not know, and on AVX2 its
+/// kernels were as fast as ours.
 #if DIFFDYN_LAYER_KERNEL && defined(__AVX512F__)
 #define DIFFDYN_PANEL_GEMM 1
 #else
@@ -256,7 +336,11 @@ inline constexpr bool kHavePanelGemm = DIFFDYN_PANEL_GEMM != 0;
 namespace internal {
 // Whether Gemm runs PanelGemm for a product of more rows than ThinGemm takes: in
 // double always, in float unless OpenBLAS runs its AVX-512 kernels (its sgemm was
-// 10 % faster than PanelGemm there, 33 against 37 us at 100 x 100 x 250).
+// 10 % faster than PanelGemm there, 33 against 37 us at 100 x 100 x 250). The same
+// for GemmFused: with a bias and ReLU in the store, the 6-term first-layer
+// products ran faster in PanelGemm alone (8.7 against 11.0 us with OpenBLAS's
+// AVX2 dgemm and the passes, one Zen 5 core) but the NeuralODE epoch slower (in 8
+// of 8 interleaved pairs, 5-30 %), so those stay with BLAS.
 template <typename S>
 inline bool PanelTakes([[maybe_unused]] Eigen::Index k) {
 #if DIFFDYN_PANEL_GEMM
@@ -275,6 +359,83 @@ constexpr bool GemmUsesBlas() {
   return false;
 #endif
 }
+
+/// What GemmFused does with each entry t = (op(A) op(B))(i, j) before it stores
+/// it: C(i, j) = r(t + bias(i)) [mask(i, j) > 0], with r(x) = max(x, 0) (as
+/// std::max gives it: NaN and -0 stay) if relu, else x. A network layer's forward
+/// pass is bias + relu, the cotangent of a ReLU layer's input (W^T abar) .* [h > 0]
+/// the mask. Where Gemm's own kernels take the product the stages run on the
+/// tile in registers, else as passes over C after the product: the same bits.
+template <typename S>
+struct GemmOutput {
+  const S* bias = nullptr;    ///< m entries added to every column, or none
+  bool relu = false;          ///< max(., 0) after the bias
+  const S* mask = nullptr;    ///< m x n (leading dimension mask_ld): times [mask > 0], or none
+  Eigen::Index mask_ld = 0;   ///< leading dimension of mask
+};
+
+namespace internal {
+
+// C = stage(alpha op(A) op(B)), the stage ScaledAddStage{beta} or, when out is not
+// null, OutputStage{*out}: run by ThinGemm or PanelGemm when one of them takes the
+// product (A untransposed, 2 or more rows, at most kThinGemmMaxInner terms; more
+// rows than ThinGemm takes only where PanelTakes). Returns whether it ran.
+template <typename S, typename DA, typename DB, typename DC>
+bool KernelGemm([[maybe_unused]] S alpha, [[maybe_unused]] const Eigen::MatrixBase<DA>& a,
+                [[maybe_unused]] bool transpose_a, [[maybe_unused]] const Eigen::MatrixBase<DB>& b,
+                [[maybe_unused]] bool transpose_b, [[maybe_unused]] S beta,
+                [[maybe_unused]] const GemmOutput<S>* out,
+                [[maybe_unused]] Eigen::MatrixBase<DC>& c) {
+#if DIFFDYN_LAYER_KERNEL
+  const Eigen::Index m = c.rows();
+  const Eigen::Index k = transpose_a ? a.rows() : a.cols();
+  if (transpose_a || m < 2 || k > kThinGemmMaxInner ||
+      (m > kThinGemmMaxRows<S> && !PanelTakes<S>(k))) {
+    return false;
+  }
+  const int mi = static_cast<int>(m), ni = static_cast<int>(c.cols()), ki = static_cast<int>(k);
+  const int lda = static_cast<int>(std::max<Eigen::Index>(1, a.derived().outerStride()));
+  const int ldb = static_cast<int>(std::max<Eigen::Index>(1, b.derived().outerStride()));
+  const int ldc = static_cast<int>(std::max<Eigen::Index>(1, c.derived().outerStride()));
+  const S* pa = a.derived().data();
+  const S* pb = b.derived().data();
+  S* pc = c.derived().data();
+  // The kernel for C's rows and B's layout, given the stage.
+  auto run = [&](const auto& stage) {
+#if DIFFDYN_PANEL_GEMM
+    if (m > kThinGemmMaxRows<S>) {
+      transpose_b ? PanelGemm<S, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, stage, pc, ldc)
+                  : PanelGemm<S, false>(mi, ni, ki, alpha, pa, lda, pb, ldb, stage, pc, ldc);
+      return;
+    }
+#endif
+    if (m <= LayerShape<S>::kLanes) {
+      transpose_b ? ThinGemmTo<S, 1, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, stage, pc, ldc)
+                  : ThinGemmTo<S, 1, false>(mi, ni, ki, alpha, pa, lda, pb, ldb, stage, pc, ldc);
+    } else {
+      transpose_b ? ThinGemmTo<S, 2, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, stage, pc, ldc)
+                  : ThinGemmTo<S, 2, false>(mi, ni, ki, alpha, pa, lda, pb, ldb, stage, pc, ldc);
+    }
+  };
+  if (out == nullptr) {
+    run(ScaledAddStage<S>{beta});
+  } else {
+    run(OutputStage<S>{out->bias, out->relu, out->mask, static_cast<std::ptrdiff_t>(out->mask_ld)});
+  }
+  return true;
+#else
+  return false;
+#endif
+}
+
+// a[r] *= [h[r] > 0] for r < n (1 or 0 from h's bits: see PositiveIndicator), in a
+// loop the compiler vectorises; the product keeps NaN and signed zeros.
+template <typename S>
+inline void MultiplyByPositiveIndicator(S* __restrict a, const S* __restrict h, Eigen::Index n) {
+  for (Eigen::Index r = 0; r < n; ++r) a[r] *= PositiveIndicator(h[r]);
+}
+
+}  // namespace internal
 
 /// C = alpha op(A) op(B) + beta C, with op(X) = X^T if the flag is set, else X.
 /// Sizes: op(A) is m x k, op(B) is k x n, C is m x n (checked in debug builds).
@@ -311,38 +472,7 @@ void Gemm(typename DC::Scalar alpha, const Eigen::MatrixBase<DA>& a, bool transp
     }
     return;
   }
-#if DIFFDYN_LAYER_KERNEL
-  // C of 2 to two vectors' rows: the thin kernel (one row: BLAS was faster); more
-  // rows: the panel kernel where it is built.
-  if (!transpose_a && m >= 2 && k <= internal::kThinGemmMaxInner &&
-      (m <= internal::kThinGemmMaxRows<S> || internal::PanelTakes<S>(k))) {
-    const int mi = static_cast<int>(m), ni = static_cast<int>(n), ki = static_cast<int>(k);
-    const int lda = static_cast<int>(std::max<Eigen::Index>(1, a.derived().outerStride()));
-    const int ldb = static_cast<int>(std::max<Eigen::Index>(1, b.derived().outerStride()));
-    const int ldc = static_cast<int>(std::max<Eigen::Index>(1, c.derived().outerStride()));
-    const S* pa = a.derived().data();
-    const S* pb = b.derived().data();
-    S* pc = c.derived().data();
-#if DIFFDYN_PANEL_GEMM
-    if (m > internal::kThinGemmMaxRows<S>) {
-      transpose_b
-          ? internal::PanelGemm<S, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc)
-          : internal::PanelGemm<S, false>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc);
-      return;
-    }
-#endif
-    if (m <= internal::LayerShape<S>::kLanes) {
-      transpose_b
-          ? internal::ThinGemm<S, 1, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc)
-          : internal::ThinGemm<S, 1, false>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc);
-    } else {
-      transpose_b
-          ? internal::ThinGemm<S, 2, true>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc)
-          : internal::ThinGemm<S, 2, false>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc);
-    }
-    return;
-  }
-#endif
+  if (internal::KernelGemm<S>(alpha, a, transpose_a, b, transpose_b, beta, nullptr, c)) return;
 #if defined(DIFFDYN_HAVE_BLAS)
   internal::UseOneBlasThread();
   // beta = 0 as a fill of our own, then beta = 1: BLAS's own beta pass took 6-9 us
@@ -381,6 +511,40 @@ void Gemm(typename DC::Scalar alpha, const Eigen::MatrixBase<DA>& a, bool transp
     c.noalias() += alpha * a * b;
   }
 #endif
+}
+
+
+/// C = out(op(A) op(B)): the product with a GemmOutput's bias, ReLU and mask
+/// applied to each entry (sizes and operands as for Gemm; the mask may not alias
+/// C). With a bias its result has the same bits as C = bias 1^T, then
+/// Gemm(1, A, B, beta = 1), then the ReLU and mask passes; without, as Gemm with
+/// beta = 0 and the passes.
+template <typename DA, typename DB, typename DC>
+void GemmFused(const Eigen::MatrixBase<DA>& a, bool transpose_a, const Eigen::MatrixBase<DB>& b,
+               bool transpose_b, const GemmOutput<typename DC::Scalar>& out,
+               const Eigen::MatrixBase<DC>& c_out) {
+  using S = typename DC::Scalar;
+  Eigen::MatrixBase<DC>& c = const_cast<Eigen::MatrixBase<DC>&>(c_out);
+  const Eigen::Index m = c.rows();
+  const Eigen::Index n = c.cols();
+  if (m == 0 || n == 0) return;
+  const Eigen::Index k = transpose_a ? a.rows() : a.cols();
+  if (k > 0 && internal::KernelGemm<S>(S(1), a, transpose_a, b, transpose_b, S(0), &out, c)) {
+    return;
+  }
+  // Elsewhere: the product, then one pass per stage, column by column.
+  if (out.bias != nullptr) {
+    c.colwise() = Eigen::Map<const Eigen::Matrix<S, Eigen::Dynamic, 1>>(out.bias, m);
+  }
+  Gemm(S(1), a, transpose_a, b, transpose_b, out.bias != nullptr ? S(1) : S(0), c);
+  for (Eigen::Index j = 0; j < n; ++j) {
+    S* col = c.derived().data() + j * c.derived().outerStride();
+    if (out.relu) {
+      Eigen::Map<Eigen::Array<S, Eigen::Dynamic, 1>> v(col, m);
+      v = v.max(S(0));
+    }
+    if (out.mask != nullptr) internal::MultiplyByPositiveIndicator(col, out.mask + j * out.mask_ld, m);
+  }
 }
 
 }  // namespace diffdyn

@@ -644,16 +644,11 @@ class Mlp {
   }
 
   // abar .*= [h > 0] column by column (abar and h rows x nb): ReLU's g' applied from
-  // its output. A plain loop over contiguous columns with the indicator taken from h's
-  // bits, which the compiler vectorises (neither a floating-point comparison nor Eigen's
-  // bool-to-double cast is); the product keeps NaN and signed zeros.
+  // its output (the product keeps NaN and signed zeros).
   template <typename ABlock, typename HBlock>
   static void MultiplyByReluDerivative(ABlock&& abar, const HBlock& h) {
-    const Eigen::Index rows = abar.rows();
     for (Eigen::Index c = 0; c < abar.cols(); ++c) {
-      B* __restrict a = abar.col(c).data();
-      const B* __restrict x = h.col(c).data();
-      for (Eigen::Index r = 0; r < rows; ++r) a[r] *= internal::PositiveIndicator(x[r]);
+      internal::MultiplyByPositiveIndicator(abar.col(c).data(), h.col(c).data(), abar.rows());
     }
   }
 
@@ -674,18 +669,20 @@ class Mlp {
     ch->h[0].leftCols(nb) = x;
     for (int l = 0; l < L; ++l) {
       const int rows = arch_.sizes[l + 1];
-      // a_l = b_l + W_l h_l, written where g(a_l) goes (activation in place), the
-      // bias broadcast first so the GEMM accumulates (no zeroing pass).
+      // a_l = b_l + W_l h_l with the bias added as the product is stored, written
+      // where g(a_l) goes (activation in place). A ReLU whose g' is read off its
+      // output later is applied in the same store.
       if (l + 1 < L) {
         auto a = ch->h[l + 1].leftCols(nb);
-        a.colwise() = b(l);
-        Gemm(1.0, W(l), false, ch->h[l].leftCols(nb), false, 1.0, a);
-        ApplyActivation(arch_.activations[l], a.data(), a.size(), a.data(),
-                        DerivativeFromOutput(*ch, l) ? nullptr : ch->dg[l].data(),
-                        jac ? ch->ddg[l].data() : nullptr);
+        const bool relu_in_store = DerivativeFromOutput(*ch, l);
+        GemmFused(W(l), false, ch->h[l].leftCols(nb), false,
+                  GemmOutput<B>{b(l).data(), relu_in_store}, a);
+        if (!relu_in_store) {
+          ApplyActivation(arch_.activations[l], a.data(), a.size(), a.data(), ch->dg[l].data(),
+                          jac ? ch->ddg[l].data() : nullptr);
+        }
       } else {
-        y.colwise() = b(l);
-        Gemm(1.0, W(l), false, ch->h[l].leftCols(nb), false, 1.0, y);
+        GemmFused(W(l), false, ch->h[l].leftCols(nb), false, GemmOutput<B>{b(l).data()}, y);
       }
       if (!jac) continue;
       // Jacobian chain: U_0 = W_0 per sample, U_l = W_l Z_l; Z_{l+1} = diag(g') U_l.
@@ -879,18 +876,20 @@ class Mlp {
   // elsewhere if W_l is thin (a side of at most kThinSide): BLAS runs the plain
   // product of the copy up to 2.5x faster than the transposed one for these
   // shapes (6 x 100 times 6 x 250).
+  // `stages` (none by default) are applied as the product is stored (GemmFused).
   template <typename ABlock, typename OutBlock>
   void GemmTransposedWeight(int l, const ABlock& abar, OutBlock&& out,
-                            typename Workspace::Chunk* buf) const {
+                            typename Workspace::Chunk* buf,
+                            const GemmOutput<B>& stages = GemmOutput<B>{}) const {
     const int rows = arch_.sizes[l + 1];
     const int cols = arch_.sizes[l];
     if (!kHavePanelGemm && std::min(rows, cols) > Workspace::kThinSide) {
-      Gemm(1.0, W(l), true, abar, false, 0.0, out);
+      GemmFused(W(l), true, abar, false, stages, out);
       return;
     }
     Eigen::Map<MatrixB> wt(buf->weight_t.data(), cols, rows);
     wt = W(l).transpose();
-    Gemm(1.0, wt, false, abar, false, 0.0, out);
+    GemmFused(wt, false, abar, false, stages, out);
   }
 
   // Reverse sweep over one chunk of nb samples starting at `begin`.
@@ -974,10 +973,13 @@ class Mlp {
       auto input_cotangent = [&] {
         if (l > 0) {
           auto next_abar = abar(nxt, cols);
-          GemmTransposedWeight(l, abar(cur, rows), next_abar, buf);
           if (relu_mask) {
-            MultiplyByReluDerivative(next_abar, ch->h[l].leftCols(nb));
+            // ReLU's g' = [h_l > 0] applied as the product is stored.
+            const auto h = ch->h[l].leftCols(nb);
+            GemmTransposedWeight(l, abar(cur, rows), next_abar, buf,
+                                 GemmOutput<B>{nullptr, false, h.data(), h.outerStride()});
           } else {
+            GemmTransposedWeight(l, abar(cur, rows), next_abar, buf);
             next_abar.array() *= ch->dg[l - 1].leftCols(nb).array();
           }
         } else if (grad_inputs) {
