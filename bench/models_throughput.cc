@@ -99,8 +99,9 @@ void BM_ApplyActivation(benchmark::State& state) {
 BENCHMARK(BM_ApplyActivation<double>)->DenseRange(0, 2)->ArgName("act")->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_ApplyActivation<float>)->DenseRange(0, 2)->ArgName("act")->Unit(benchmark::kMicrosecond);
 
-// The peak candidates (peak_dgemm.h): Eigen and OpenBLAS, C = A B at 2048^3 on two
-// threads, per precision.
+// The peak candidates (peak_dgemm.h): Eigen, OpenBLAS with its own kernel set and
+// (on AVX-512 CPUs) with its AVX-512 kernels, C = A B at 2048^3 on two threads, per
+// precision.
 template <typename S>
 void BM_PeakGemmEigenTwoThreads(benchmark::State& state) {
   bench::PeakGemm2Threads<S>(state);
@@ -109,10 +110,16 @@ template <typename S>
 void BM_PeakGemmOpenBlasTwoThreads(benchmark::State& state) {
   bench::PeakGemmOpenBlas2Threads<S>(state);
 }
+template <typename S>
+void BM_PeakGemmOpenBlasAvx512KernelsTwoThreads(benchmark::State& state) {
+  bench::PeakGemmOpenBlasAvx512Kernels2Threads<S>(state);
+}
 BENCHMARK(BM_PeakGemmEigenTwoThreads<double>)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 BENCHMARK(BM_PeakGemmOpenBlasTwoThreads<double>)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 BENCHMARK(BM_PeakGemmEigenTwoThreads<float>)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 BENCHMARK(BM_PeakGemmOpenBlasTwoThreads<float>)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
+BENCHMARK(BM_PeakGemmOpenBlasAvx512KernelsTwoThreads<double>)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
+BENCHMARK(BM_PeakGemmOpenBlasAvx512KernelsTwoThreads<float>)->UseRealTime()->Unit(benchmark::kMillisecond)->MinTime(1.0);
 
 // Console output plus a record of every GFLOP/s counter.
 class RecordingReporter : public benchmark::ConsoleReporter {

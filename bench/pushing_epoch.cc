@@ -157,11 +157,30 @@ BENCHMARK(BM_PeakDgemmOpenBlas2Threads)
     ->Unit(benchmark::kMillisecond)
     ->MinTime(2.0);
 
+// OpenBLAS's AVX-512 kernels whatever its own choice (skipped without AVX-512).
+void BM_PeakDgemmOpenBlasAvx512Kernels2Threads(benchmark::State& state) {
+  bench::PeakGemmOpenBlasAvx512Kernels2Threads<double>(state);
+}
+BENCHMARK(BM_PeakDgemmOpenBlasAvx512Kernels2Threads)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(2.0);
+
 // The float32 peak, for BM_EpochAbsNodeRk4F32's fraction.
 void BM_PeakSgemmOpenBlas2Threads(benchmark::State& state) {
   bench::PeakGemmOpenBlas2Threads<float>(state);
 }
 BENCHMARK(BM_PeakSgemmOpenBlas2Threads)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(2.0);
+
+void BM_PeakSgemmOpenBlasAvx512Kernels2Threads(benchmark::State& state) {
+  bench::PeakGemmOpenBlasAvx512Kernels2Threads<float>(state);
+}
+BENCHMARK(BM_PeakSgemmOpenBlasAvx512Kernels2Threads)
     ->MeasureProcessCPUTime()
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond)
