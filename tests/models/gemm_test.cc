@@ -169,6 +169,50 @@ TEST(Gemm, ThinProductDoesNotDependOnTheColumnGrouping) {
   EXPECT_TRUE(whole == parts) << "largest gap " << (whole - parts).cwiseAbs().maxCoeff();
 }
 
+// A thin C times a transposed B (a thin layer's weight gradient, 6 x 100 += abar
+// 6 x 250 h^T) runs as its transpose on the panel kernel where C's rows fill at most
+// half a vector: the same sums in the same order as the thin kernel, so with alpha = 1
+// and beta 0 (NaN in C overwritten) or 1, a layer's products, the same bits; with
+// other alpha and beta within a rounding of alpha's and beta's products. C is a
+// strided block.
+template <typename S>
+void CheckTransposedThinProduct() {
+#if DIFFDYN_LAYER_KERNEL
+  using Matrix = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
+  struct Scales {
+    S alpha, beta;
+    bool same_bits;
+  };
+  for (int m : {2, 3, 4, 6, 8}) {
+    if (m > internal::LayerShape<S>::kLanes) continue;
+    const Matrix a = Matrix::Random(m, 250);
+    const Matrix b = Matrix::Random(100, 250);
+    for (Scales scales : {Scales{S(1), S(0), true}, Scales{S(1), S(1), true},
+                          Scales{S(0.75), S(0.5), false}}) {
+      Matrix big = Matrix::Random(m + 2, 100);
+      if (scales.beta == S(0)) big(0, 0) = std::numeric_limits<S>::quiet_NaN();
+      Matrix thin = big;
+      Gemm(scales.alpha, a, false, b, true, scales.beta, big.topRows(m));
+      internal::ThinGemm<S, 1, true>(m, 100, 250, scales.alpha, a.data(), m, b.data(), 100,
+                                     scales.beta, thin.data(), m + 2);
+      const S gap = (big - thin).cwiseAbs().maxCoeff();
+      if (scales.same_bits) {
+        EXPECT_TRUE(big == thin) << "m " << m << " beta " << scales.beta << ", largest gap " << gap;
+      } else {
+        EXPECT_LT(gap, 8 * std::numeric_limits<S>::epsilon() * big.cwiseAbs().maxCoeff())
+            << "m " << m;
+      }
+    }
+  }
+#endif
+}
+
+TEST(Gemm, ThinProductWithTransposedBHasTheThinKernelsBits) {
+  if (!kHaveLayerKernel) GTEST_SKIP() << "the thin kernel is built for AVX2 or AVX-512 only";
+  CheckTransposedThinProduct<double>();
+  CheckTransposedThinProduct<float>();
+}
+
 // Same value in x and y: equal with the same sign (so -0 against +0 differs), or
 // both NaN.
 template <typename S>

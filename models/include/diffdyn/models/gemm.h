@@ -33,7 +33,11 @@
 // times 100 x 250 products 1.45-1.7x faster (one Zen 5 core, 2026-12-02, double
 // and float); against OpenBLAS's AVX-512 kernels 1.25-1.4x faster in double and
 // 10 % slower in float, so float products stay with OpenBLAS when it runs those
-// (internal::BlasRunsAvx512Kernels).
+// (internal::BlasRunsAvx512Kernels). A thin C whose rows fill at most half a vector
+// times a transposed B (a 6-wide layer's weight gradient in float) runs there as
+// its transpose on the panel kernel, in full vectors (internal::TransposedThinGemm:
+// 2.3 us against the thin kernel's 5.8-6.5 for 6 x 250 times 250 x 100, one Zen 5
+// core, 2026-12-07), with the thin kernel's sums.
 //
 // GemmFused adds a network layer's output stages to the product: a bias and ReLU
 // (the forward pass), or ReLU's derivative as a mask (the backward pass), applied
@@ -316,6 +320,30 @@ inline void PanelGemm(int m, int n, int k, S alpha, const S* a, int lda, const S
     }
   }
 }
+
+/// Most entries of a C that TransposedThinGemm takes (its C^T is a stack buffer).
+inline constexpr int kTransposedThinMaxEntries = 4096;
+
+/// C = beta C + alpha A B^T for a thin C (m rows, at most half a SIMD vector, so the
+/// thin kernel would leave most lanes idle), as C^T = alpha B A^T on PanelGemm (B
+/// n x k read in place down its columns, A m x k broadcast), then added to beta C
+/// transposed. Each entry is summed over j = 0, 1, ... from zero as in ThinGemm: with
+/// alpha = 1 and beta 0 or 1 (a layer's products) the bits are ThinGemm's, otherwise
+/// alpha's and beta's products may round apart (the compiler may fuse either into the
+/// last add). m n <= kTransposedThinMaxEntries.
+template <typename S>
+inline void TransposedThinGemm(int m, int n, int k, S alpha, const S* a, int lda, const S* b,
+                               int ldb, S beta, S* c, int ldc) {
+  alignas(kLayerVectorBytes) S ct[kTransposedThinMaxEntries];
+  PanelGemm<S, true>(n, m, k, alpha, b, ldb, a, lda, ScaledAddStage<S>{S(0)}, ct, n);
+  for (int j = 0; j < n; ++j) {
+    S* col = c + std::ptrdiff_t(j) * ldc;
+    for (int i = 0; i < m; ++i) {
+      const S t = ct[j + std::ptrdiff_t(i) * n];
+      col[i] = beta == S(0) ? t : beta * col[i] + t;
+    }
+  }
+}
 #endif
 
 }  // namespace internal
@@ -400,6 +428,15 @@ bool KernelGemm([[maybe_unused]] S alpha, [[maybe_unused]] const Eigen::MatrixBa
   const S* pa = a.derived().data();
   const S* pb = b.derived().data();
   S* pc = c.derived().data();
+#if DIFFDYN_PANEL_GEMM
+  // A thin C times a transposed B with more columns than a row panel: its transpose.
+  if (out == nullptr && transpose_b && 2 * m <= LayerShape<S>::kLanes &&
+      c.cols() > kThinGemmMaxRows<S> && m * c.cols() <= kTransposedThinMaxEntries &&
+      PanelTakes<S>(k)) {
+    TransposedThinGemm<S>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc);
+    return true;
+  }
+#endif
   // The kernel for C's rows and B's layout, given the stage.
   auto run = [&](const auto& stage) {
 #if DIFFDYN_PANEL_GEMM
