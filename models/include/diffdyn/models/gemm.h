@@ -336,12 +336,10 @@ inline void TransposedThinGemm(int m, int n, int k, S alpha, const S* a, int lda
                                int ldb, S beta, S* c, int ldc) {
   alignas(kLayerVectorBytes) S ct[kTransposedThinMaxEntries];
   PanelGemm<S, true>(n, m, k, alpha, b, ldb, a, lda, ScaledAddStage<S>{S(0)}, ct, n);
+  const ScaledAddStage<S> add{beta};
   for (int j = 0; j < n; ++j) {
-    S* col = c + std::ptrdiff_t(j) * ldc;
-    for (int i = 0; i < m; ++i) {
-      const S t = ct[j + std::ptrdiff_t(i) * n];
-      col[i] = beta == S(0) ? t : beta * col[i] + t;
-    }
+    for (int i = 0; i < m; ++i)
+      add.Store(ct[j + std::ptrdiff_t(i) * n], c + i + std::ptrdiff_t(j) * ldc, i, j);
   }
 }
 #endif
@@ -431,7 +429,7 @@ bool KernelGemm([[maybe_unused]] S alpha, [[maybe_unused]] const Eigen::MatrixBa
 #if DIFFDYN_PANEL_GEMM
   // A thin C times a transposed B with more columns than a row panel: its transpose.
   if (out == nullptr && transpose_b && 2 * m <= LayerShape<S>::kLanes &&
-      c.cols() > kThinGemmMaxRows<S> && m * c.cols() <= kTransposedThinMaxEntries &&
+      ni > kThinGemmMaxRows<S> && m * ni <= kTransposedThinMaxEntries &&
       PanelTakes<S>(k)) {
     TransposedThinGemm<S>(mi, ni, ki, alpha, pa, lda, pb, ldb, beta, pc, ldc);
     return true;
