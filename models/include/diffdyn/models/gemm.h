@@ -23,7 +23,9 @@
 // BLAS's kernels (k = 0, 1, ... from zero, then added to beta C): the abs-NODE
 // and res-NN trained on it are byte-identical to those of the BLAS products.
 // OpenBLAS sums some other shapes in another order (one column goes to its gemv,
-// and its kernel's column tails), where results differ in the last bits.
+// and its kernel's column tails), where results differ in the last bits. Where C's
+// rows fill at most half a SIMD vector (6 floats on AVX-512), each vector holds two
+// columns of C (internal::PairedColumns), with the same sums.
 //
 // On AVX-512 builds every other product with at most kThinGemmMaxInner terms per
 // sum and A untransposed runs a kernel of its own too (internal::PanelGemm: row
@@ -57,6 +59,7 @@
 #include <cstddef>
 #include <string_view>
 #include <type_traits>
+#include <utility>
 
 #include "diffdyn/models/activations.h"
 #include "diffdyn/models/layer_kernel.h"
@@ -189,18 +192,39 @@ struct OutputStage {
   }
 };
 
+// A's columns that a load of kWidth entries from their row 0 reads in place (the load
+// stays inside A's (k - 1) lda + m entries): the first ones, their count returned; the
+// others (fewer than kWidth) are copied to `tail`, kWidth entries each, zero past row m.
+// The kernels read these copies instead, so no tile copies a column of its own.
+template <typename S, int kWidth>
+inline int PadLastColumns(int m, int k, const S* a, int lda, S* tail) {
+  const std::ptrdiff_t end = std::ptrdiff_t(k - 1) * lda + m;
+  int in_place = 0;
+  if (end >= kWidth) in_place = static_cast<int>(std::min<std::ptrdiff_t>(k, (end - kWidth) / lda + 1));
+  eigen_assert(k - in_place <= kWidth);  // lda >= m >= 1
+  for (int j = in_place; j < k; ++j) {
+    S* col = tail + std::ptrdiff_t(j - in_place) * kWidth;
+    std::fill_n(col, kWidth, S(0));
+    std::copy_n(a + std::ptrdiff_t(j) * lda, m, col);
+  }
+  return in_place;
+}
+
 // Columns [s, s + G) of C = stage(alpha A op(B)) for ThinGemm, G a compile-time
 // count (g < G runs the kernel of g columns). Each column of C is V vectors of
 // accumulators; per k one load of A's column and one broadcast of op(B)[j, s + q]
-// per column q. A's columns are read in place while a full V-vector load stays
-// inside A (its entries past row m only reach lanes that are never stored), the
-// last few through a zero-padded copy.
+// per column q. A's first `in_place` columns are read in place (a V-vector load's
+// entries past row m only reach lanes that are never stored), the others from
+// `tail` (PadLastColumns). Not inlined: inside its callers' loops the compiler
+// spilled an operand vector of the 2 x 12 tile to the stack (double 100 x 100 of 250
+// terms 1.45x slower, one Zen 5 core).
 template <typename S, int V, int G, bool kTransB, typename Stage>
-inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, int ldb,
-                        const Stage& stage, S* c, int ldc, int s, int g) {
+[[gnu::noinline]] void ThinColumns(int m, int k, S alpha, const S* a, int lda, int in_place, const S* tail,
+                        const S* b, int ldb, const Stage& stage, S* c, int ldc, int s, int g) {
   if constexpr (G > 1) {
     if (g < G)
-      return ThinColumns<S, V, G - 1, kTransB>(m, k, alpha, a, lda, b, ldb, stage, c, ldc, s, g);
+      return ThinColumns<S, V, G - 1, kTransB>(m, k, alpha, a, lda, in_place, tail, b, ldb, stage,
+                                               c, ldc, s, g);
   }
   using Vec = typename LayerVectors<S>::Vec;
   using VecU = typename LayerVectors<S>::VecU;
@@ -219,16 +243,8 @@ inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, 
     }
   };
   stage.Prefetch(m, s, G, kLanes);
-  const std::ptrdiff_t end = std::ptrdiff_t(k - 1) * lda + m;  // one past A's last entry
-  int in_place = 0;
-  if (end >= V * kLanes)
-    in_place = static_cast<int>(std::min<std::ptrdiff_t>(k, (end - V * kLanes) / lda + 1));
   for (int j = 0; j < in_place; ++j) step(j, a + std::ptrdiff_t(j) * lda);
-  for (int j = in_place; j < k; ++j) {
-    alignas(kLayerVectorBytes) S padded[V * kLanes] = {};
-    std::copy_n(a + std::ptrdiff_t(j) * lda, m, padded);
-    step(j, padded);
-  }
+  for (int j = in_place; j < k; ++j) step(j, tail + std::ptrdiff_t(j - in_place) * V * kLanes);
   // Whole vectors of C stored as vectors, the rows past the last one entry by entry
   // (the same operations per entry), each through the output stage.
   for (int q = 0; q < G; ++q) {
@@ -238,6 +254,108 @@ inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, 
       stage.Store(Vec(alpha * acc[q][v]), col + i, i, s + q);
     }
     for (; i < m; ++i) stage.Store(S(alpha * acc[q][i / kLanes][i % kLanes]), col + i, i, s + q);
+  }
+}
+
+// Vectors of N entries of S (a SIMD vector or a part of one) and the lane moves of
+// PairedColumns: Splat (x in every lane), Concat (lo's lanes, then hi's).
+template <typename S, int N>
+struct SimdOf {
+  typedef S type __attribute__((vector_size(N * sizeof(S))));
+  typedef S unaligned __attribute__((vector_size(N * sizeof(S)), aligned(alignof(S)), may_alias));
+};
+template <typename S, int N>
+using Simd = typename SimdOf<S, N>::type;
+
+template <typename V, typename H, std::size_t... I>
+inline V ConcatLanes(H lo, H hi, std::index_sequence<I...>) {
+  return __builtin_shufflevector(lo, hi, static_cast<int>(I)...);
+}
+template <typename S, int N>
+inline Simd<S, 2 * N> Concat(Simd<S, N> lo, Simd<S, N> hi) {
+  return ConcatLanes<Simd<S, 2 * N>>(lo, hi, std::make_index_sequence<2 * N>{});
+}
+template <typename S, std::size_t... I>
+inline Simd<S, sizeof...(I)> SplatLanes(S x, std::index_sequence<I...>) {
+  return Simd<S, sizeof...(I)>{((void)I, x)...};
+}
+template <typename S, int N>
+inline Simd<S, N> Splat(S x) {
+  return SplatLanes<S>(x, std::make_index_sequence<N>{});
+}
+
+/// Columns of C per pair kernel tile in PairedGemmTo (PairedColumns' vectors of
+/// accumulators times two).
+inline constexpr int kPairedCols = 16;
+
+// Columns [s, s + g) of C = stage(alpha A op(B)) for ThinGemm when C's rows fill at
+// most half a SIMD vector (m <= H = kLanes / 2): each vector of accumulators holds two
+// columns, rows of column s + 2p in lanes [0, m) and of s + 2p + 1 in [H, H + m), so
+// one multiply-add serves both. Per k one load of H entries of A's column, put in
+// both halves, and op(B)[j, s + 2p], op(B)[j, s + 2p + 1] broadcast to one half each.
+// P vectors, g <= 2P (fewer pairs run the kernel of fewer vectors; an odd g's last
+// vector repeats its column in the upper half, which is not stored). Every entry is
+// summed over j = 0, 1, ... from zero with the operations of ThinColumns, so the bits
+// are ThinColumns'.
+template <typename S, int P, bool kTransB, typename Stage>
+[[gnu::noinline]] void PairedColumns(int m, int k, S alpha, const S* a, int lda, int in_place,
+                          const S* tail, const S* b, int ldb, const Stage& stage, S* c, int ldc,
+                          int s, int g) {
+  if constexpr (P > 1) {
+    if (g <= 2 * (P - 1))
+      return PairedColumns<S, P - 1, kTransB>(m, k, alpha, a, lda, in_place, tail, b, ldb, stage,
+                                              c, ldc, s, g);
+  }
+  using Vec = typename LayerVectors<S>::Vec;
+  constexpr int kLanes = LayerShape<S>::kLanes;
+  constexpr int H = kLanes / 2;
+  using Half = Simd<S, H>;
+  using HalfU = typename SimdOf<S, H>::unaligned;
+  // op(B)[j, column] = b[offset[column] + j step].
+  std::ptrdiff_t offset[2 * P];
+  for (int t = 0; t < 2 * P; ++t) {
+    const std::ptrdiff_t q = s + std::min(t, g - 1);
+    offset[t] = kTransB ? q : q * ldb;
+  }
+  const std::ptrdiff_t step = kTransB ? ldb : 1;
+  Vec acc[P];
+  for (int p = 0; p < P; ++p) acc[p] = Vec{};
+  auto sum = [&](int j, const S* col) {
+    const Half x = *reinterpret_cast<const HalfU*>(col);
+    const Vec xx = Concat<S, H>(x, x);
+    const S* bj = b + std::ptrdiff_t(j) * step;
+    for (int p = 0; p < P; ++p) {
+      const Vec bb = Concat<S, H>(Splat<S, H>(bj[offset[2 * p]]), Splat<S, H>(bj[offset[2 * p + 1]]));
+      acc[p] += bb * xx;
+    }
+  };
+  stage.Prefetch(m, s, g, kLanes);
+  for (int j = 0; j < in_place; ++j) sum(j, a + std::ptrdiff_t(j) * lda);
+  for (int j = in_place; j < k; ++j) sum(j, tail + std::ptrdiff_t(j - in_place) * H);
+  // Each column's m entries through the output stage, as ThinColumns stores rows past
+  // its last whole vector.
+  for (int p = 0; p < P; ++p) {
+    alignas(kLayerVectorBytes) S t[kLanes];
+    *reinterpret_cast<Vec*>(t) = acc[p];
+    for (int h = 0; h < 2 && 2 * p + h < g; ++h) {
+      const int q = s + 2 * p + h;
+      S* col = c + std::ptrdiff_t(q) * ldc;
+      for (int i = 0; i < m; ++i) stage.Store(S(alpha * t[h * H + i]), col + i, i, q);
+    }
+  }
+}
+
+// ThinGemmTo for m <= kLanes / 2: PairedColumns over groups of kPairedCols columns.
+template <typename S, bool kTransB, typename Stage>
+inline void PairedGemmTo(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
+                         const Stage& stage, S* c, int ldc) {
+  constexpr int kPairs = kPairedCols / 2;
+  constexpr int H = LayerShape<S>::kLanes / 2;
+  alignas(kLayerVectorBytes) S tail[H * H];
+  const int in_place = PadLastColumns<S, H>(m, k, a, lda, tail);
+  for (int s = 0; s < n; s += kPairedCols) {
+    PairedColumns<S, kPairs, kTransB>(m, k, alpha, a, lda, in_place, tail, b, ldb, stage, c, ldc,
+                                      s, std::min(kPairedCols, n - s));
   }
 }
 
@@ -253,12 +371,24 @@ inline void ThinColumns(int m, int k, S alpha, const S* a, int lda, const S* b, 
 template <typename S, int V, bool kTransB, int kGroup = V == 1 ? 8 : 6, typename Stage>
 inline void ThinGemmTo(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
                        const Stage& stage, S* c, int ldc) {
+  if constexpr (V == 1) {
+    if (2 * m <= LayerShape<S>::kLanes) {
+      PairedGemmTo<S, kTransB>(m, n, k, alpha, a, lda, b, ldb, stage, c, ldc);
+      return;
+    }
+  }
+  constexpr int kWidth = V * LayerShape<S>::kLanes;
+  alignas(kLayerVectorBytes) S tail[kWidth * kWidth];
+  const int in_place = PadLastColumns<S, kWidth>(m, k, a, lda, tail);
   int s = 0;
   for (; s + kGroup <= n; s += kGroup) {
-    ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, b, ldb, stage, c, ldc, s, kGroup);
+    ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, in_place, tail, b, ldb, stage, c, ldc,
+                                       s, kGroup);
   }
-  if (s < n)
-    ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, b, ldb, stage, c, ldc, s, n - s);
+  if (s < n) {
+    ThinColumns<S, V, kGroup, kTransB>(m, k, alpha, a, lda, in_place, tail, b, ldb, stage, c, ldc,
+                                       s, n - s);
+  }
 }
 template <typename S, int V, bool kTransB, int kGroup = V == 1 ? 8 : 6>
 inline void ThinGemm(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb, S beta,
