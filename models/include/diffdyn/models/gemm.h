@@ -24,8 +24,8 @@
 // and res-NN trained on it are byte-identical to those of the BLAS products.
 // OpenBLAS sums some other shapes in another order (one column goes to its gemv,
 // and its kernel's column tails), where results differ in the last bits. Where C's
-// rows fill at most half a SIMD vector (6 floats on AVX-512), each vector holds two
-// columns of C (internal::PairedColumns), with the same sums.
+// rows fill at most half a SIMD vector (a 6-row product in float on AVX-512), each
+// vector holds two columns of C (internal::PairedColumns), with the same sums.
 //
 // On AVX-512 builds every other product with at most kThinGemmMaxInner terms per
 // sum and A untransposed runs a kernel of its own too (internal::PanelGemm: row
@@ -200,7 +200,9 @@ template <typename S, int kWidth>
 inline int PadLastColumns(int m, int k, const S* a, int lda, S* tail) {
   const std::ptrdiff_t end = std::ptrdiff_t(k - 1) * lda + m;
   int in_place = 0;
-  if (end >= kWidth) in_place = static_cast<int>(std::min<std::ptrdiff_t>(k, (end - kWidth) / lda + 1));
+  if (end >= kWidth) {
+    in_place = static_cast<int>(std::min<std::ptrdiff_t>(k, (end - kWidth) / lda + 1));
+  }
   eigen_assert(k - in_place <= kWidth);  // lda >= m >= 1
   for (int j = in_place; j < k; ++j) {
     S* col = tail + std::ptrdiff_t(j - in_place) * kWidth;
@@ -219,8 +221,9 @@ inline int PadLastColumns(int m, int k, const S* a, int lda, S* tail) {
 // spilled an operand vector of the 2 x 12 tile to the stack (double 100 x 100 of 250
 // terms 1.45x slower, one Zen 5 core).
 template <typename S, int V, int G, bool kTransB, typename Stage>
-[[gnu::noinline]] void ThinColumns(int m, int k, S alpha, const S* a, int lda, int in_place, const S* tail,
-                        const S* b, int ldb, const Stage& stage, S* c, int ldc, int s, int g) {
+[[gnu::noinline]] void ThinColumns(int m, int k, S alpha, const S* a, int lda, int in_place,
+                                   const S* tail, const S* b, int ldb, const Stage& stage, S* c,
+                                   int ldc, int s, int g) {
   if constexpr (G > 1) {
     if (g < G)
       return ThinColumns<S, V, G - 1, kTransB>(m, k, alpha, a, lda, in_place, tail, b, ldb, stage,
@@ -284,8 +287,8 @@ inline Simd<S, N> Splat(S x) {
   return SplatLanes<S>(x, std::make_index_sequence<N>{});
 }
 
-/// Columns of C per pair kernel tile in PairedGemmTo (PairedColumns' vectors of
-/// accumulators times two).
+/// Columns of C per tile of PairedColumns in ThinGemmTo (its vectors of accumulators
+/// times two).
 inline constexpr int kPairedCols = 16;
 
 // Columns [s, s + g) of C = stage(alpha A op(B)) for ThinGemm when C's rows fill at
@@ -299,8 +302,8 @@ inline constexpr int kPairedCols = 16;
 // are ThinColumns'.
 template <typename S, int P, bool kTransB, typename Stage>
 [[gnu::noinline]] void PairedColumns(int m, int k, S alpha, const S* a, int lda, int in_place,
-                          const S* tail, const S* b, int ldb, const Stage& stage, S* c, int ldc,
-                          int s, int g) {
+                                     const S* tail, const S* b, int ldb, const Stage& stage, S* c,
+                                     int ldc, int s, int g) {
   if constexpr (P > 1) {
     if (g <= 2 * (P - 1))
       return PairedColumns<S, P - 1, kTransB>(m, k, alpha, a, lda, in_place, tail, b, ldb, stage,
@@ -325,7 +328,8 @@ template <typename S, int P, bool kTransB, typename Stage>
     const Vec xx = Concat<S, H>(x, x);
     const S* bj = b + std::ptrdiff_t(j) * step;
     for (int p = 0; p < P; ++p) {
-      const Vec bb = Concat<S, H>(Splat<S, H>(bj[offset[2 * p]]), Splat<S, H>(bj[offset[2 * p + 1]]));
+      const Vec bb =
+          Concat<S, H>(Splat<S, H>(bj[offset[2 * p]]), Splat<S, H>(bj[offset[2 * p + 1]]));
       acc[p] += bb * xx;
     }
   };
@@ -345,20 +349,6 @@ template <typename S, int P, bool kTransB, typename Stage>
   }
 }
 
-// ThinGemmTo for m <= kLanes / 2: PairedColumns over groups of kPairedCols columns.
-template <typename S, bool kTransB, typename Stage>
-inline void PairedGemmTo(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
-                         const Stage& stage, S* c, int ldc) {
-  constexpr int kPairs = kPairedCols / 2;
-  constexpr int H = LayerShape<S>::kLanes / 2;
-  alignas(kLayerVectorBytes) S tail[H * H];
-  const int in_place = PadLastColumns<S, H>(m, k, a, lda, tail);
-  for (int s = 0; s < n; s += kPairedCols) {
-    PairedColumns<S, kPairs, kTransB>(m, k, alpha, a, lda, in_place, tail, b, ldb, stage, c, ldc,
-                                      s, std::min(kPairedCols, n - s));
-  }
-}
-
 /// C = beta C + alpha A op(B) for C with few rows: A m x k (column-major,
 /// leading dimension lda), op(B) k x n with op(B)[j, s] = B[j + s ldb], or
 /// B[s + j ldb] if kTransB; C m x n (ldc); m <= V SIMD vectors of S. Columns of
@@ -371,9 +361,16 @@ inline void PairedGemmTo(int m, int n, int k, S alpha, const S* a, int lda, cons
 template <typename S, int V, bool kTransB, int kGroup = V == 1 ? 8 : 6, typename Stage>
 inline void ThinGemmTo(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
                        const Stage& stage, S* c, int ldc) {
+  // Rows in at most half a vector: two columns per vector, kPairedCols per tile.
   if constexpr (V == 1) {
-    if (2 * m <= LayerShape<S>::kLanes) {
-      PairedGemmTo<S, kTransB>(m, n, k, alpha, a, lda, b, ldb, stage, c, ldc);
+    constexpr int H = LayerShape<S>::kLanes / 2;
+    if (m <= H) {
+      alignas(kLayerVectorBytes) S tail[H * H];
+      const int in_place = PadLastColumns<S, H>(m, k, a, lda, tail);
+      for (int s = 0; s < n; s += kPairedCols) {
+        PairedColumns<S, kPairedCols / 2, kTransB>(m, k, alpha, a, lda, in_place, tail, b, ldb,
+                                                   stage, c, ldc, s, std::min(kPairedCols, n - s));
+      }
       return;
     }
   }
