@@ -170,50 +170,54 @@ TEST(Gemm, ThinProductDoesNotDependOnTheColumnGrouping) {
 }
 
 // Where C's rows fill at most half a vector the thin kernel holds two columns per
-// vector (internal::PairedColumns). Each entry is summed as with one vector per
-// column, so the bits are those of the two-vector thin kernel (which never pairs):
-// m = 1 to half a vector, both layouts of B, odd and even column counts (an odd
-// last column pairs with itself), NaN in C with beta 0, strided C. With alpha = 1 and
-// beta 0 or 1 (a layer's products) the same bits; with other alpha and beta within a
-// rounding of their products (the compiler may fuse either into the last add). The
-// output stages on paired columns (thin C and the panel kernel's last rows) are
-// checked against BLAS and one pass per stage in CheckFusedStages.
+// vector (internal::PairedColumns), or, on AVX-512 with fewer rows and B
+// untransposed, transposes B's columns in registers for C^T = B^T A^T
+// (internal::TransposedColumns). Each entry is summed as with one vector per column,
+// so the bits are those of the two-vector thin kernel (which does neither): m = 1 to
+// half a vector, both layouts of B, sums of 1, 16, 100 and 256 terms (whole and
+// partial vectors of k), odd and even column counts (an odd last column pairs with
+// itself; a last tile of fewer columns repeats one), NaN in C with beta 0, strided C.
+// With alpha = 1 and beta 0 or 1 (a layer's products) the same bits; with other alpha
+// and beta within a rounding of their products (the compiler may fuse either into the
+// last add). The output stages on these kernels (thin C and the panel kernel's last
+// rows) are checked against BLAS and one pass per stage in CheckFusedStages.
 template <typename S>
-void CheckPairedColumns() {
+void CheckHalfVectorKernels() {
 #if DIFFDYN_LAYER_KERNEL
   using Matrix = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
   const int half = internal::LayerShape<S>::kLanes / 2;
   for (int m = 1; m <= half; ++m) {
     for (int n : {1, 2, 15, 16, 17, 250}) {
       for (bool tb : {false, true}) {
-        const int k = 100;
-        std::vector<S> a_data(std::size_t(m) * k);  // exactly sized: no reads past A
-        Eigen::Map<Matrix> a(a_data.data(), m, k);
-        a = Matrix::Random(m, k);
-        const Matrix b = tb ? Matrix::Random(n, k) : Matrix::Random(k, n);
-        for (S beta : {S(0), S(1), S(0.5)}) {
-          Matrix paired = Matrix::Random(m + 2, n);
-          if (beta == S(0)) paired(0, 0) = std::numeric_limits<S>::quiet_NaN();
-          Matrix unpaired = paired;
-          const S alpha = beta == S(0.5) ? S(0.75) : S(1);
-          auto run = [&](auto kernel, Matrix& c) {
-            kernel(m, n, k, alpha, a.data(), m, b.data(), static_cast<int>(b.rows()), beta,
-                   c.data(), m + 2);
-          };
-          if (tb) {
-            run(internal::ThinGemm<S, 1, true>, paired);
-            run(internal::ThinGemm<S, 2, true>, unpaired);
-          } else {
-            run(internal::ThinGemm<S, 1, false>, paired);
-            run(internal::ThinGemm<S, 2, false>, unpaired);
-          }
-          const S gap = (paired - unpaired).cwiseAbs().maxCoeff();
-          if (alpha == S(1)) {
-            EXPECT_TRUE(paired == unpaired) << "m " << m << " n " << n << " tb " << tb << " beta "
-                                            << beta << ", largest gap " << gap;
-          } else {
-            EXPECT_LT(gap, 8 * std::numeric_limits<S>::epsilon() * paired.cwiseAbs().maxCoeff())
-                << "m " << m << " n " << n << " tb " << tb;
+        for (int k : {1, 16, 100, 256}) {
+          std::vector<S> a_data(std::size_t(m) * k);  // exactly sized: no reads past A
+          Eigen::Map<Matrix> a(a_data.data(), m, k);
+          a = Matrix::Random(m, k);
+          const Matrix b = tb ? Matrix::Random(n, k) : Matrix::Random(k, n);
+          for (S beta : {S(0), S(1), S(0.5)}) {
+            Matrix paired = Matrix::Random(m + 2, n);
+            if (beta == S(0)) paired(0, 0) = std::numeric_limits<S>::quiet_NaN();
+            Matrix unpaired = paired;
+            const S alpha = beta == S(0.5) ? S(0.75) : S(1);
+            auto run = [&](auto kernel, Matrix& c) {
+              kernel(m, n, k, alpha, a.data(), m, b.data(), static_cast<int>(b.rows()), beta,
+                     c.data(), m + 2);
+            };
+            if (tb) {
+              run(internal::ThinGemm<S, 1, true>, paired);
+              run(internal::ThinGemm<S, 2, true>, unpaired);
+            } else {
+              run(internal::ThinGemm<S, 1, false>, paired);
+              run(internal::ThinGemm<S, 2, false>, unpaired);
+            }
+            const S gap = (paired - unpaired).cwiseAbs().maxCoeff();
+            if (alpha == S(1)) {
+              EXPECT_TRUE(paired == unpaired) << "m " << m << " n " << n << " tb " << tb << " k "
+                                              << k << " beta " << beta << ", largest gap " << gap;
+            } else {
+              EXPECT_LT(gap, 8 * std::numeric_limits<S>::epsilon() * paired.cwiseAbs().maxCoeff())
+                  << "m " << m << " n " << n << " tb " << tb << " k " << k;
+            }
           }
         }
       }
@@ -222,10 +226,10 @@ void CheckPairedColumns() {
 #endif
 }
 
-TEST(Gemm, PairedThinColumnsHaveTheThinKernelsBits) {
+TEST(Gemm, HalfVectorKernelsHaveTheThinKernelsBits) {
   if (!kHaveLayerKernel) GTEST_SKIP() << "the thin kernel is built for AVX2 or AVX-512 only";
-  CheckPairedColumns<double>();
-  CheckPairedColumns<float>();
+  CheckHalfVectorKernels<double>();
+  CheckHalfVectorKernels<float>();
 }
 
 // A thin C times a transposed B (a thin layer's weight gradient, 6 x 100 += abar

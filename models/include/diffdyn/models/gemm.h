@@ -24,8 +24,12 @@
 // and res-NN trained on it are byte-identical to those of the BLAS products.
 // OpenBLAS sums some other shapes in another order (one column goes to its gemv,
 // and its kernel's column tails), where results differ in the last bits. Where C's
-// rows fill at most half a SIMD vector (a 6-row product in float on AVX-512), each
-// vector holds two columns of C (internal::PairedColumns), with the same sums.
+// rows fill at most half a SIMD vector, each vector holds two columns of C
+// (internal::PairedColumns), with the same sums; on AVX-512, where they fill less
+// than half a vector and B is untransposed (a 6-row product in float), C^T = B^T A^T
+// runs with B's columns transposed in registers instead (internal::TransposedColumns:
+// 4.4 against 6.0 us for 6 x 250 of 100 terms, one Zen 5 core, 2026-12-07), with the
+// same sums again.
 //
 // On AVX-512 builds every other product with at most kThinGemmMaxInner terms per
 // sum and A untransposed runs a kernel of its own too (internal::PanelGemm: row
@@ -63,6 +67,10 @@
 
 #include "diffdyn/models/activations.h"
 #include "diffdyn/models/layer_kernel.h"
+
+#if defined(__AVX512F__)
+#include <immintrin.h>
+#endif
 
 #if defined(DIFFDYN_HAVE_BLAS)
 extern "C" {
@@ -349,6 +357,132 @@ template <typename S, int P, bool kTransB, typename Stage>
   }
 }
 
+#if defined(__AVX512F__)
+/// Whether ThinGemmTo runs a C whose rows fill less than half a vector times an
+/// untransposed B on internal::TransposedColumns: AVX-512 builds.
+inline constexpr bool kHaveTransposedColumns = true;
+
+// The first `count` entries from p (0 < count <= the lanes) in a vector, zero in the
+// other lanes: AVX-512's masked load, which reads nothing past them.
+template <typename S>
+inline typename LayerVectors<S>::Vec LoadFirst(const S* p, int count) {
+  using Vec = typename LayerVectors<S>::Vec;
+  const unsigned mask = (1u << count) - 1u;
+  if constexpr (std::is_same_v<S, float>) {
+    return (Vec)_mm512_maskz_loadu_ps(static_cast<__mmask16>(mask), p);
+  } else {
+    return (Vec)_mm512_maskz_loadu_pd(static_cast<__mmask8>(mask), p);
+  }
+}
+
+// One stage of TransposeSquare for rows r and r + B of the square (r's bit B clear):
+// lane l of the new row r (kSecond: of r + B) and where it comes from (< L: row r,
+// else row r + B).
+constexpr int TransposeSource(int lanes, int block, bool second, int l) {
+  if (second) return (l & block) ? lanes + l : l + block;
+  return (l & block) ? lanes + l - block : l;
+}
+template <int L, int B, bool kSecond, typename Vec, std::size_t... P>
+inline Vec TransposePick(Vec x, Vec y, std::index_sequence<P...>) {
+  return __builtin_shufflevector(x, y, TransposeSource(L, B, kSecond, static_cast<int>(P))...);
+}
+
+// v[r][l] to v[l][r] for the square of L vectors of L lanes: per stage B = 1, 2, ...,
+// L / 2, rows r and r + B swap their off-diagonal blocks of B lanes.
+template <typename Vec, int L, int B = 1>
+[[gnu::always_inline]] inline void TransposeSquare(Vec* v) {
+  if constexpr (B < L) {
+    constexpr auto lanes = std::make_index_sequence<L>{};
+    for (int r = 0; r < L; ++r) {
+      if (r & B) continue;
+      const Vec x = v[r], y = v[r + B];
+      v[r] = TransposePick<L, B, false>(x, y, lanes);
+      v[r + B] = TransposePick<L, B, true>(x, y, lanes);
+    }
+    TransposeSquare<Vec, L, 2 * B>(v);
+  }
+}
+
+/// Column vectors of a TransposedColumns tile for C's R rows: R x W accumulators
+/// (at most 24 of AVX-512's 32 registers), W <= 4.
+template <int R>
+inline constexpr int kTransposedColVecs = std::max(1, std::min(4, 24 / R));
+
+// Columns [s, s + g) of C = stage(alpha A B) for ThinGemm when C has R rows (fewer
+// than half a vector) and B is untransposed: C^T = B^T A^T with W vectors of C's
+// columns (g <= W L). First B's columns, loaded down k L terms at a time (a masked
+// load past k), are transposed in registers (TransposeSquare) to the rows of op(B),
+// kept in `rows` (k <= kThinGemmMaxInner); then per term j one broadcast of A(i, j)
+// per row i and W R multiply-adds, the accumulators in registers throughout. Every
+// entry is summed over j = 0, 1, ... from zero with the operations of ThinColumns,
+// so the bits are ThinColumns'. Tile columns past g repeat column s + g - 1 and are
+// not stored.
+template <typename S, int R, int W, typename Stage>
+[[gnu::noinline]] void TransposedColumns(int k, S alpha, const S* a, int lda, const S* b, int ldb,
+                                         const Stage& stage, S* c, int ldc, int s, int g) {
+  using Vec = typename LayerVectors<S>::Vec;
+  using VecU = typename LayerVectors<S>::VecU;
+  constexpr int L = LayerShape<S>::kLanes;
+  // op(B)'s rows j < k, column vector w in rows[j][w]: W L columns of B loaded down k
+  // (from `column`), L terms at a time, and transposed.
+  const S* column[W * L];
+  for (int q = 0; q < W * L; ++q) column[q] = b + std::ptrdiff_t(s + std::min(q, g - 1)) * ldb;
+  alignas(kLayerVectorBytes) Vec rows[(kThinGemmMaxInner + L - 1) / L * L][W];
+  for (int j0 = 0; j0 < k; j0 += L) {
+    const int count = std::min(L, k - j0);
+    for (int w = 0; w < W; ++w) {
+      Vec v[L];
+      for (int r = 0; r < L; ++r) {
+        const S* p = column[w * L + r] + j0;
+        v[r] = count == L ? Vec(*reinterpret_cast<const VecU*>(p)) : LoadFirst<S>(p, count);
+      }
+      TransposeSquare<Vec, L>(v);
+      for (int r = 0; r < L; ++r) rows[j0 + r][w] = v[r];
+    }
+  }
+  // C^T's tile: per term one broadcast of A(i, j) per row i.
+  Vec acc[W][R];
+  for (int w = 0; w < W; ++w) {
+    for (int i = 0; i < R; ++i) acc[w][i] = Vec{};
+  }
+  for (int j = 0; j < k; ++j) {
+    const S* at = a + std::ptrdiff_t(j) * lda;
+    for (int i = 0; i < R; ++i) {
+      const Vec x = Splat<S, L>(at[i]);
+      for (int w = 0; w < W; ++w) acc[w][i] += rows[j][w] * x;
+    }
+  }
+  // Row i of the tile's columns to C entry by entry through the output stage.
+  alignas(kLayerVectorBytes) S sums[W][R][L];
+  for (int w = 0; w < W; ++w) {
+    for (int i = 0; i < R; ++i) *reinterpret_cast<Vec*>(sums[w][i]) = acc[w][i];
+  }
+  for (int q = 0; q < g; ++q) {
+    S* out = c + std::ptrdiff_t(s + q) * ldc;
+    for (int i = 0; i < R; ++i) {
+      stage.Store(S(alpha * sums[q / L][i][q % L]), out + i, i, s + q);
+    }
+  }
+}
+
+// TransposedColumns over C's n columns for R = m rows (1 <= m < kLanes / 2).
+template <typename S, typename Stage, int R = 1>
+inline void TransposedGemmTo(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
+                             const Stage& stage, S* c, int ldc) {
+  if constexpr (2 * (R + 1) < LayerShape<S>::kLanes) {
+    if (m > R) {
+      return TransposedGemmTo<S, Stage, R + 1>(m, n, k, alpha, a, lda, b, ldb, stage, c, ldc);
+    }
+  }
+  constexpr int W = kTransposedColVecs<R>, kCols = W * LayerShape<S>::kLanes;
+  for (int s = 0; s < n; s += kCols) {
+    TransposedColumns<S, R, W>(k, alpha, a, lda, b, ldb, stage, c, ldc, s, std::min(kCols, n - s));
+  }
+}
+#else
+inline constexpr bool kHaveTransposedColumns = false;
+#endif
+
 /// C = beta C + alpha A op(B) for C with few rows: A m x k (column-major,
 /// leading dimension lda), op(B) k x n with op(B)[j, s] = B[j + s ldb], or
 /// B[s + j ldb] if kTransB; C m x n (ldc); m <= V SIMD vectors of S. Columns of
@@ -361,9 +495,17 @@ template <typename S, int P, bool kTransB, typename Stage>
 template <typename S, int V, bool kTransB, int kGroup = V == 1 ? 8 : 6, typename Stage>
 inline void ThinGemmTo(int m, int n, int k, S alpha, const S* a, int lda, const S* b, int ldb,
                        const Stage& stage, S* c, int ldc) {
-  // Rows in at most half a vector: two columns per vector, kPairedCols per tile.
+  // Rows in at most half a vector: C^T = B^T A^T for fewer rows and an untransposed B
+  // (AVX-512; two columns per vector would leave lanes idle), else two columns per
+  // vector, kPairedCols per tile.
   if constexpr (V == 1) {
     constexpr int H = LayerShape<S>::kLanes / 2;
+    if constexpr (!kTransB && kHaveTransposedColumns) {
+      if (m < H && k <= kThinGemmMaxInner) {
+        TransposedGemmTo<S>(m, n, k, alpha, a, lda, b, ldb, stage, c, ldc);
+        return;
+      }
+    }
     if (m <= H) {
       alignas(kLayerVectorBytes) S tail[H * H];
       const int in_place = PadLastColumns<S, H>(m, k, a, lda, tail);
