@@ -195,27 +195,29 @@ void CheckHalfVectorKernels() {
           a = Matrix::Random(m, k);
           const Matrix b = tb ? Matrix::Random(n, k) : Matrix::Random(k, n);
           for (S beta : {S(0), S(1), S(0.5)}) {
-            Matrix paired = Matrix::Random(m + 2, n);
-            if (beta == S(0)) paired(0, 0) = std::numeric_limits<S>::quiet_NaN();
-            Matrix unpaired = paired;
+            Matrix one_vector = Matrix::Random(m + 2, n);
+            if (beta == S(0)) one_vector(0, 0) = std::numeric_limits<S>::quiet_NaN();
+            Matrix two_vectors = one_vector;
             const S alpha = beta == S(0.5) ? S(0.75) : S(1);
             auto run = [&](auto kernel, Matrix& c) {
               kernel(m, n, k, alpha, a.data(), m, b.data(), static_cast<int>(b.rows()), beta,
                      c.data(), m + 2);
             };
             if (tb) {
-              run(internal::ThinGemm<S, 1, true>, paired);
-              run(internal::ThinGemm<S, 2, true>, unpaired);
+              run(internal::ThinGemm<S, 1, true>, one_vector);
+              run(internal::ThinGemm<S, 2, true>, two_vectors);
             } else {
-              run(internal::ThinGemm<S, 1, false>, paired);
-              run(internal::ThinGemm<S, 2, false>, unpaired);
+              run(internal::ThinGemm<S, 1, false>, one_vector);
+              run(internal::ThinGemm<S, 2, false>, two_vectors);
             }
-            const S gap = (paired - unpaired).cwiseAbs().maxCoeff();
+            const S gap = (one_vector - two_vectors).cwiseAbs().maxCoeff();
             if (alpha == S(1)) {
-              EXPECT_TRUE(paired == unpaired) << "m " << m << " n " << n << " tb " << tb << " k "
-                                              << k << " beta " << beta << ", largest gap " << gap;
+              EXPECT_TRUE(one_vector == two_vectors)
+                  << "m " << m << " n " << n << " tb " << tb << " k " << k << " beta " << beta
+                  << ", largest gap " << gap;
             } else {
-              EXPECT_LT(gap, 8 * std::numeric_limits<S>::epsilon() * paired.cwiseAbs().maxCoeff())
+              EXPECT_LT(gap,
+                        8 * std::numeric_limits<S>::epsilon() * one_vector.cwiseAbs().maxCoeff())
                   << "m " << m << " n " << n << " tb " << tb << " k " << k;
             }
           }

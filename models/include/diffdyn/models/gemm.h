@@ -403,10 +403,10 @@ template <typename Vec, int L, int B = 1>
   }
 }
 
-/// Column vectors of a TransposedColumns tile for C's R rows: R x W accumulators
-/// (at most 24 of AVX-512's 32 registers), W <= 4.
+/// Column vectors of a TransposedColumns tile for C's R rows (R < 8): R x W
+/// accumulators (at most 24 of AVX-512's 32 registers), W <= 4.
 template <int R>
-inline constexpr int kTransposedColVecs = std::max(1, std::min(4, 24 / R));
+inline constexpr int kTransposedColVecs = std::min(4, 24 / R);
 
 // Columns [s, s + g) of C = stage(alpha A B) for ThinGemm when C has R rows (fewer
 // than half a vector) and B is untransposed: C^T = B^T A^T with W vectors of C's
