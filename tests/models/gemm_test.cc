@@ -6,13 +6,13 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <initializer_list>
 #include <limits>
+#include <utility>
 #include <vector>
-
-#include <Eigen/Dense>
 
 namespace diffdyn {
 namespace {
@@ -350,6 +350,30 @@ void CheckFusedStages() {
 TEST(GemmFused, StagesGiveTheValuesOfTheProductThenOnePassEachInDoubleAndFloat) {
   CheckFusedStages<double>();
   CheckFusedStages<float>();
+}
+
+// TransposeInto against Eigen's transpose, entry for entry, on shapes with whole
+// SIMD blocks, partial ones on either side and neither, from a strided A; entries of
+// out past A^T's (the buffer's tail) stay untouched.
+template <typename S>
+void CheckTransposeInto() {
+  using M = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic>;
+  for (const auto& [rows, cols] : std::vector<std::pair<int, int>>{
+           {1, 1}, {3, 100}, {100, 6}, {6, 100}, {8, 8}, {16, 16}, {17, 33}, {100, 100}, {64, 9}}) {
+    const int lda = rows + 5;
+    const M a = M::Random(lda, cols);
+    std::vector<S> out(static_cast<size_t>(rows) * cols + 7, S(-7));
+    internal::TransposeInto<S>(rows, cols, a.data(), lda, out.data());
+    const M expected = a.topRows(rows).transpose();
+    const Eigen::Map<const M> got(out.data(), cols, rows);
+    EXPECT_TRUE(got == expected) << rows << " x " << cols;
+    for (size_t e = static_cast<size_t>(rows) * cols; e < out.size(); ++e) EXPECT_EQ(out[e], S(-7));
+  }
+}
+
+TEST(TransposeInto, MatchesEigensTransposeOnEveryEdgeInDoubleAndFloat) {
+  CheckTransposeInto<double>();
+  CheckTransposeInto<float>();
 }
 
 }  // namespace

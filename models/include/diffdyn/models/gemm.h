@@ -649,6 +649,119 @@ inline bool PanelTakes([[maybe_unused]] Eigen::Index k) {
 }
 }  // namespace internal
 
+namespace internal {
+#if defined(__AVX512F__)
+// The last step of a block transpose in registers: w[L n + e] = lane L (of four
+// 128-bit lanes) of x[e], x[n + e], x[2n + e], x[3n + e], for e < n; even(x, y) and
+// odd(x, y) take the even (odd) lanes of x, then of y.
+template <typename V, typename Even, typename Odd>
+inline void GatherLanes(const V* x, int n, Even even, Odd odd, V* w) {
+  for (int e = 0; e < n; ++e) {
+    const V s0 = even(x[e], x[n + e]), s1 = odd(x[e], x[n + e]);
+    const V s2 = even(x[2 * n + e], x[3 * n + e]), s3 = odd(x[2 * n + e], x[3 * n + e]);
+    w[e] = even(s0, s2);
+    w[n + e] = even(s1, s3);
+    w[2 * n + e] = odd(s0, s2);
+    w[3 * n + e] = odd(s1, s3);
+  }
+}
+
+// The rows x cols (at most 16 x 16) float block at a (column-major, leading dimension
+// lda) transposed into out (leading dimension ldo), through registers: per 128-bit
+// lane, pairs of columns interleaved, then quadruples, then the lanes gathered across
+// the four quadruple groups. Masked loads and stores touch only the block's entries.
+// The lane moves are written as shuffles of vectors, not as the intrinsics, whose
+// GCC 12 definitions warn of uninitialised values under -Wall.
+inline void TransposeBlock(int rows, int cols, const float* a, std::ptrdiff_t lda, float* out,
+                           std::ptrdiff_t ldo) {
+  const __mmask16 row_mask = static_cast<__mmask16>((1u << rows) - 1u);
+  const __mmask16 col_mask = static_cast<__mmask16>((1u << cols) - 1u);
+  __m512 r[16], t[16];
+  for (int q = 0; q < 16; ++q) {
+    r[q] = q < cols ? _mm512_maskz_loadu_ps(row_mask, a + q * lda) : _mm512_setzero_ps();
+  }
+  for (int k = 0; k < 8; ++k) {
+    t[2 * k] = __builtin_shufflevector(r[2 * k], r[2 * k + 1], 0, 16, 1, 17, 4, 20, 5, 21, 8, 24, 9,
+                                       25, 12, 28, 13, 29);
+    t[2 * k + 1] = __builtin_shufflevector(r[2 * k], r[2 * k + 1], 2, 18, 3, 19, 6, 22, 7, 23, 10,
+                                           26, 11, 27, 14, 30, 15, 31);
+  }
+  // r[4k + e], lane L: entry 4 L + e of columns 4k .. 4k + 3.
+  for (int k = 0; k < 4; ++k) {
+    for (int h = 0; h < 2; ++h) {
+      const __m512 x = t[4 * k + h], y = t[4 * k + h + 2];
+      r[4 * k + 2 * h] =
+          __builtin_shufflevector(x, y, 0, 1, 16, 17, 4, 5, 20, 21, 8, 9, 24, 25, 12, 13, 28, 29);
+      r[4 * k + 2 * h + 1] =
+          __builtin_shufflevector(x, y, 2, 3, 18, 19, 6, 7, 22, 23, 10, 11, 26, 27, 14, 15, 30, 31);
+    }
+  }
+  // Row 4 L + e of the block from lane L of r[e], r[4 + e], r[8 + e], r[12 + e]; the
+  // even 128-bit lanes of x then of y, or the odd ones.
+  const auto even = [](__m512 x, __m512 y) -> __m512 {
+    return __builtin_shufflevector(x, y, 0, 1, 2, 3, 8, 9, 10, 11, 16, 17, 18, 19, 24, 25, 26, 27);
+  };
+  const auto odd = [](__m512 x, __m512 y) -> __m512 {
+    return __builtin_shufflevector(x, y, 4, 5, 6, 7, 12, 13, 14, 15, 20, 21, 22, 23, 28, 29, 30,
+                                   31);
+  };
+  __m512 w[16];
+  GatherLanes(r, 4, even, odd, w);
+  for (int p = 0; p < rows; ++p) _mm512_mask_storeu_ps(out + p * ldo, col_mask, w[p]);
+}
+
+// The rows x cols (at most 8 x 8) double block the same way: pairs of columns
+// interleaved, then the lanes gathered across the four pair groups.
+inline void TransposeBlock(int rows, int cols, const double* a, std::ptrdiff_t lda, double* out,
+                           std::ptrdiff_t ldo) {
+  const __mmask8 row_mask = static_cast<__mmask8>((1u << rows) - 1u);
+  const __mmask8 col_mask = static_cast<__mmask8>((1u << cols) - 1u);
+  __m512d r[8], t[8];
+  for (int q = 0; q < 8; ++q) {
+    r[q] = q < cols ? _mm512_maskz_loadu_pd(row_mask, a + q * lda) : _mm512_setzero_pd();
+  }
+  // t[2k + e], lane L: entry 2 L + e of columns 2k, 2k + 1.
+  for (int k = 0; k < 4; ++k) {
+    t[2 * k] = __builtin_shufflevector(r[2 * k], r[2 * k + 1], 0, 8, 2, 10, 4, 12, 6, 14);
+    t[2 * k + 1] = __builtin_shufflevector(r[2 * k], r[2 * k + 1], 1, 9, 3, 11, 5, 13, 7, 15);
+  }
+  // Row 2 L + e of the block from lane L of t[e], t[2 + e], t[4 + e], t[6 + e].
+  const auto even = [](__m512d x, __m512d y) -> __m512d {
+    return __builtin_shufflevector(x, y, 0, 1, 4, 5, 8, 9, 12, 13);
+  };
+  const auto odd = [](__m512d x, __m512d y) -> __m512d {
+    return __builtin_shufflevector(x, y, 2, 3, 6, 7, 10, 11, 14, 15);
+  };
+  __m512d w[8];
+  GatherLanes(t, 2, even, odd, w);
+  for (int p = 0; p < rows; ++p) _mm512_mask_storeu_pd(out + p * ldo, col_mask, w[p]);
+}
+#endif
+
+/// out = A^T: A is rows x cols (column-major, leading dimension lda), out cols x
+/// rows (leading dimension cols); they must not overlap. On AVX-512 in blocks of
+/// one SIMD vector square (the last ones partial), transposed in registers; else
+/// entry by entry.
+template <typename S>
+void TransposeInto(int rows, int cols, const S* a, int lda, S* out) {
+#if defined(__AVX512F__)
+  constexpr int kB = 64 / static_cast<int>(sizeof(S));
+  for (int i = 0; i < rows; i += kB) {
+    for (int j = 0; j < cols; j += kB) {
+      TransposeBlock(std::min(kB, rows - i), std::min(kB, cols - j),
+                     a + i + std::ptrdiff_t(j) * lda, lda, out + j + std::ptrdiff_t(i) * cols,
+                     cols);
+    }
+  }
+#else
+  for (int i = 0; i < rows; ++i) {
+    for (int j = 0; j < cols; ++j)
+      out[j + std::ptrdiff_t(i) * cols] = a[i + std::ptrdiff_t(j) * lda];
+  }
+#endif
+}
+}  // namespace internal
+
 /// Whether Gemm calls an external BLAS (true) or Eigen's products (false).
 constexpr bool GemmUsesBlas() {
 #if defined(DIFFDYN_HAVE_BLAS)
