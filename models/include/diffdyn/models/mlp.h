@@ -894,50 +894,6 @@ class Mlp {
     GemmFused(wt, false, abar, false, stages, out);
   }
 
-  // g += a 1 (a's row sums): rows in blocks of 64, 32, ..., 1, each block's sums
-  // held in registers down a's columns, then added to g. A row-wise sum ran the
-  // rows that do not fill a SIMD vector (a 6-unit layer, the last 4 of 100) as
-  // serial adds down strided rows: float 6 x 250 0.61 us, now 0.08; 100 x 250
-  // 1.06 us, now 0.96 (L2-bound; one Zen 5 core).
-  template <typename ABlock>
-  static void AddRowSums(const ABlock& a, Eigen::Map<VectorB>& g) {
-    Eigen::Index i = 0;
-    for (; i + 64 <= a.rows(); i += 64) AddRowSumsOfBlock<64>(a, i, g.data());
-    auto block = [&](auto rows) {
-      constexpr int kRows = decltype(rows)::value;
-      if (i + kRows <= a.rows()) {
-        AddRowSumsOfBlock<kRows>(a, i, g.data());
-        i += kRows;
-      }
-    };
-    block(std::integral_constant<int, 32>{});
-    block(std::integral_constant<int, 16>{});
-    block(std::integral_constant<int, 8>{});
-    block(std::integral_constant<int, 4>{});
-    block(std::integral_constant<int, 2>{});
-    block(std::integral_constant<int, 1>{});
-  }
-  // g[i0 + r] += s_r, r < R, s_r = ((a_r0 + a_r1) + (a_r2 + a_r3)) + ... (four
-  // columns per add into s, the rest one by one).
-  template <int R, typename ABlock>
-  static void AddRowSumsOfBlock(const ABlock& a, Eigen::Index i0, B* g) {
-    B s[R] = {};
-    const Eigen::Index n = a.cols();
-    Eigen::Index j = 0;
-    for (; j + 4 <= n; j += 4) {
-      const B* c0 = &a.coeffRef(i0, j);
-      const B* c1 = &a.coeffRef(i0, j + 1);
-      const B* c2 = &a.coeffRef(i0, j + 2);
-      const B* c3 = &a.coeffRef(i0, j + 3);
-      for (int r = 0; r < R; ++r) s[r] += (c0[r] + c1[r]) + (c2[r] + c3[r]);
-    }
-    for (; j < n; ++j) {
-      const B* col = &a.coeffRef(i0, j);
-      for (int r = 0; r < R; ++r) s[r] += col[r];
-    }
-    for (int r = 0; r < R; ++r) g[i0 + r] += s[r];
-  }
-
   // Reverse sweep over one chunk of nb samples starting at `begin`.
   // Backward / BackwardAccumulate: grad (num_parameters() entries, or null) is
   // overwritten, or added to if `accumulate`.
@@ -1042,7 +998,7 @@ class Mlp {
           gb.setZero();
         }
         Gemm(1.0, abar(cur, rows), false, ch->h[l].leftCols(nb), true, 1.0, gw);
-        AddRowSums(abar(cur, rows), gb);
+        gb += abar(cur, rows).rowwise().sum();
         if (gjac) {
           if (l == 0) {
             for (int bb = 0; bb < nb; ++bb) gw += ubar(cur, rows).middleCols(Eigen::Index(bb) * n0, n0);
