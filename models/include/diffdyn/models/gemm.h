@@ -647,9 +647,7 @@ inline bool PanelTakes([[maybe_unused]] Eigen::Index k) {
   return false;
 #endif
 }
-}  // namespace internal
 
-namespace internal {
 #if defined(__AVX512F__)
 // The last step of a block transpose in registers: w[L n + e] = lane L (of four
 // 128-bit lanes) of x[e], x[n + e], x[2n + e], x[3n + e], for e < n; even(x, y) and
